@@ -1,0 +1,921 @@
+"""Tests for verne_post.cl: APT/CLSF and CSV readers (real NX samples + synthetic files)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from verne_post.cl import read_cl, read_pose_csv, read_toolpath
+from verne_post.errors import InputError
+from verne_post.toolpath import Comment, Coolant, Spindle, Stop, ToolChange, Toolpath
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+DATA = Path(__file__).resolve().parent / "data"
+VARIABLE_AXIS = EXAMPLES / "nx_variable_axis_inch.cls"
+SWARF = EXAMPLES / "nx_swarf_inch_crlf.cls"
+
+MM = "UNITS/MM\nFEDRAT/MMPM,100\n"  # 2-line preamble of most synthetic files
+
+
+def write(tmp_path: Path, text: str, name: str = "t.cls") -> Path:
+    p = tmp_path / name
+    p.write_bytes(text.encode())
+    return p
+
+
+def cl(tmp_path: Path, text: str, **kw: object) -> Toolpath:
+    return read_cl(write(tmp_path, text), **kw)  # type: ignore[arg-type]
+
+
+def err(tmp_path: Path, text: str, **kw: object) -> InputError:
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as info:
+        read_cl(path, **kw)  # type: ignore[arg-type]
+    e = info.value
+    assert "\n" not in str(e)
+    assert e.source == str(path)
+    return e
+
+
+def events(tp: Toolpath, kind: type) -> list:
+    return [e for e in tp.events if isinstance(e, kind)]
+
+
+# --------------------------------------------------------------------------- real NX samples
+
+
+def raw_gotos(path: Path) -> tuple[list[int], list[list[float]]]:
+    """Independent reading of the GOTO lines: (1-based line numbers, numbers)."""
+    text = path.read_bytes().decode()
+    lines, vals = [], []
+    for n, ln in enumerate(text.replace("\r\n", "\n").split("\n"), 1):
+        if ln.startswith("GOTO/"):
+            lines.append(n)
+            vals.append([float(v) for v in ln[5:].split(",")])
+    return lines, vals
+
+
+def msys_origin(path: Path) -> np.ndarray:
+    for ln in path.read_text().splitlines():
+        if ln.startswith("MSYS/"):
+            v = [float(x) for x in ln[5:].split(",")]
+            assert v[3:] == [1, 0, 0, 0, 1, 0]  # identity rotation in both samples
+            return np.array(v[:3])
+    raise AssertionError("no MSYS")
+
+
+@pytest.mark.parametrize("path", [VARIABLE_AXIS, SWARF], ids=["variable_axis", "swarf"])
+def test_real_sample_poses(path: Path) -> None:
+    goto_lines, vals = raw_gotos(path)
+    tp = read_cl(path)
+    assert len(tp) == len(goto_lines)  # 348 / 325 GOTO records
+    assert tp.units == "inch"
+    assert tp.source == str(path)
+    # line numbers point at GOTO lines, in order
+    assert tp.line.tolist() == goto_lines
+    text_lines = path.read_text().splitlines()
+    assert all(text_lines[k - 1].startswith("GOTO") for k in tp.line)
+    # inch -> mm, MSYS origin applied; tool axis carried over by 3-number GOTOs
+    origin = msys_origin(path)
+    axis = np.array([0.0, 0.0, 1.0])
+    for k, v in enumerate(vals):
+        if len(v) == 6:
+            axis = np.array(v[3:]) / np.linalg.norm(v[3:])
+        np.testing.assert_allclose(tp.tip[k], (np.array(v[:3]) + origin) * 25.4, atol=1e-9)
+        np.testing.assert_allclose(tp.axis[k], axis, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-12)
+    # two RAPID records before the first two GOTOs, then FEDRAT/IPM,10 = 254 mm/min
+    assert tp.rapid[:2].all()
+    assert np.isnan(tp.feed[:2]).all()
+    feed_moves = ~tp.rapid
+    np.testing.assert_allclose(tp.feed[feed_moves], 254.0)
+    assert not tp.inverse_time.any()
+    assert not any("unknown record" in w for w in tp.warnings)
+
+
+def test_real_sample_counts_match_sources_md() -> None:
+    assert len(read_cl(VARIABLE_AXIS)) == 348
+    assert len(read_cl(SWARF)) == 325
+
+
+def test_variable_axis_tool_length_from_tldata() -> None:
+    tp = read_cl(VARIABLE_AXIS)
+    changes = events(tp, ToolChange)
+    assert len(changes) == 1
+    assert changes[0].length == pytest.approx(76.2)  # TLDATA length 3.0 in
+    assert changes[0].diameter == pytest.approx(25.4)
+    assert changes[0].index == 0
+    assert changes[0].tool == 0  # the file has no LOAD/TOOL
+    assert (tp.tool == 0).all()
+    assert any("without a tool load" in w for w in tp.warnings)
+    comments = events(tp, Comment)
+    assert comments[0].text.startswith("NORM_PART")
+
+
+def test_swarf_sample_tool_load_and_crlf() -> None:
+    assert b"\r\n" in SWARF.read_bytes()
+    tp = read_cl(SWARF)
+    (change,) = events(tp, ToolChange)
+    assert (change.tool, change.adjust, change.index) == (1, 1, 0)
+    assert change.length == pytest.approx(101.6)  # TLDATA length 4.0 in
+    assert change.diameter == pytest.approx(0.75 * 25.4)
+    assert (tp.tool == 1).all()
+    assert events(tp, Comment)[0].text.startswith("CONTOUR_PROFILE_CHAMFER")
+
+
+def test_inch_inferred_from_ipm_with_warning() -> None:
+    tp = read_cl(SWARF)
+    assert any("inch inferred from IPM" in w for w in tp.warnings)
+    assert read_cl(SWARF, units="inch").warnings == ()
+
+
+# --------------------------------------------------------------------------- realistic fixture
+
+
+def test_fixture_multi_operation_file() -> None:
+    path = DATA / "nx_multi_op_mm.cls"
+    tp = read_cl(path)
+    assert tp.warnings == ()  # info-listing header/trailer, PAINT, $$ all silent
+    assert tp.part_name == "VERNE BRACKET REV B"
+    assert tp.units == "mm"
+    text_lines = path.read_text().splitlines()
+    # FROM is the first pose, a rapid, before MSYS (identity frame)
+    np.testing.assert_allclose(tp.tip[0], [0, 0, 250])
+    assert tp.rapid[0] and tp.line[0] == 10
+    # MSYS origin (100, 50, 0) applied afterwards
+    np.testing.assert_allclose(tp.tip[1], [60, 50, 20])
+    changes = events(tp, ToolChange)
+    assert [(c.tool, c.length, c.diameter, c.adjust) for c in changes] == [(3, 90, 16, 3), (7, 120, 8, 7)]
+    assert [c.line for c in changes] == [16, 32]
+    # tool array follows the loads
+    assert tp.tool[0] == 0
+    assert (tp.tool[1 : changes[1].index] == 3).all()
+    assert (tp.tool[changes[1].index :] == 7).all()
+    # every pose line starts with a motion record
+    assert all(text_lines[k - 1].split("/")[0] in ("GOTO", "FROM", "GOHOME") for k in tp.line)
+    # the drilling cycle: 2 holes x 3 poses at lines 37 and 38
+    assert (tp.line == 37).sum() == 3 and (tp.line == 38).sum() == 3
+    hole = tp.tip[tp.line == 37]
+    np.testing.assert_allclose(hole, [[100, 50, 8], [100, 50, -7], [100, 50, 8]])
+    # GOHOME: rapid back to the FROM pose (part frame)
+    np.testing.assert_allclose(tp.tip[-1], [0, 0, 250])
+    assert tp.rapid[-1]
+    assert [e.optional for e in events(tp, Stop)] == [True]
+    assert [e.mode for e in events(tp, Coolant)] == ["FLOOD", "OFF"]
+
+
+# --------------------------------------------------------------------------- GOTO
+
+
+def test_goto_three_values_carries_axis_initial_z(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/1,2,3\nGOTO/4,5,6,0,1,0\nGOTO/7,8,9\n")
+    np.testing.assert_allclose(tp.tip, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
+    np.testing.assert_allclose(tp.axis, [[0, 0, 1], [0, 1, 0], [0, 1, 0]])
+    assert tp.line.tolist() == [3, 4, 5]
+    np.testing.assert_allclose(tp.feed, 100.0)
+    assert not tp.rapid.any()
+
+
+def test_goto_slightly_non_unit_axis_is_normalised(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/0,0,0,0,0,0.99999\nGOTO/0,0,0,0.6,0,0.800004\n")
+    np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-15)
+    np.testing.assert_allclose(tp.axis[0], [0, 0, 1])
+
+
+def test_goto_seven_numbers_is_an_error(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "GOTO/1,2,3,0,0,1,5\n")
+    assert (e.reason, e.line) == ("GOTO needs 3 or 6 numbers, got 7", 3)
+
+
+# --------------------------------------------------------------------------- RAPID / FEDRAT
+
+
+@pytest.mark.parametrize("rapid", ["RAPID", "RAPID/", "rapid", " RAPID / "])
+def test_rapid_applies_to_next_motion_only(tmp_path: Path, rapid: str) -> None:
+    tp = cl(tmp_path, MM + f"GOTO/0,0,0\n{rapid}\nPAINT/COLOR,3\nGOTO/1,0,0\nGOTO/2,0,0\n")
+    assert tp.rapid.tolist() == [False, True, False]
+    assert np.isnan(tp.feed[1]) and tp.feed[2] == 100
+
+
+@pytest.mark.parametrize(
+    ("head", "record", "feed"),
+    [
+        ("UNITS/MM", "FEDRAT/MMPM,500", 500.0),
+        ("UNITS/MM", "FEDRAT/IPM,10", 254.0),
+        ("UNITS/MM", "FEDRAT/500,MMPM", 500.0),
+        ("UNITS/MM", "FEDRAT/10,IPM", 254.0),
+        ("UNITS/MM", "FEDRAT/500", 500.0),
+        ("UNITS/INCHES", "FEDRAT/10", 254.0),
+        ("UNITS/INCHES", "FEDRAT/MMPM,500", 500.0),
+        ("UNITS/MM", "FEDRAT / mmpm , 500.", 500.0),
+        ("UNITS/MM\nSPINDL/RPM,1000,CLW", "FEDRAT/MMPR,0.1", 100.0),
+        ("UNITS/MM\nSPINDL/RPM,1000,CLW", "FEDRAT/0.1,MMPR", 100.0),
+        ("UNITS/MM\nSPINDL/RPM,1000,CLW", "FEDRAT/IPR,0.004", 101.6),
+    ],
+)
+def test_fedrat_variants(tmp_path: Path, head: str, record: str, feed: float) -> None:
+    tp = cl(tmp_path, f"{head}\n{record}\nGOTO/0,0,0\n")
+    assert tp.feed[0] == pytest.approx(feed)
+    assert not tp.inverse_time[0]
+
+
+def test_fedrat_inverse_time(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/0,0,0\nFEDRAT/INVERS,12.5\nGOTO/1,0,0\nFEDRAT/MMPM,300\nGOTO/2,0,0\n")
+    assert tp.inverse_time.tolist() == [False, True, False]
+    assert tp.feed.tolist() == [100.0, 12.5, 300.0]
+
+
+def test_per_rev_feed_follows_spindle_speed(tmp_path: Path) -> None:
+    text = "UNITS/MM\nSPINDL/RPM,1000,CLW\nFEDRAT/MMPR,0.1\nGOTO/0,0,0\nSPINDL/RPM,2000,CLW\nGOTO/1,0,0\n"
+    tp = cl(tmp_path, text)
+    assert tp.feed.tolist() == pytest.approx([100.0, 200.0])
+
+
+def test_per_rev_feed_without_spindle_is_an_error(tmp_path: Path) -> None:
+    e = err(tmp_path, "UNITS/MM\nFEDRAT/MMPR,0.1\nGOTO/0,0,0\n")
+    assert e.line == 2 and "spindle speed" in e.reason
+
+
+def test_per_rev_feed_with_spindle_off_is_an_error(tmp_path: Path) -> None:
+    text = "UNITS/MM\nSPINDL/RPM,1000\nFEDRAT/MMPR,0.1\nGOTO/0,0,0\nSPINDL/OFF\nGOTO/1,0,0\n"
+    e = err(tmp_path, text)
+    assert e.line == 6 and "spindle is off" in e.reason
+
+
+def test_feed_move_before_any_fedrat(tmp_path: Path) -> None:
+    e = err(tmp_path, "UNITS/MM\nRAPID\nGOTO/0,0,0\nGOTO/1,0,0\n")
+    assert (e.reason, e.line) == ("feed move before any FEDRAT", 4)
+
+
+@pytest.mark.parametrize("record", ["FEDRAT/0", "FEDRAT/-5,MMPM", "FEDRAT/MMPM", "FEDRAT/FAST,5", "FEDRAT/1,2"])
+def test_bad_fedrat(tmp_path: Path, record: str) -> None:
+    assert err(tmp_path, f"UNITS/MM\n{record}\nGOTO/0,0,0\n").line == 2
+
+
+# --------------------------------------------------------------------------- units
+
+
+@pytest.mark.parametrize(
+    ("record", "units", "scale"),
+    [
+        ("UNITS/MM", "mm", 1.0),
+        ("UNITS/INCHES", "inch", 25.4),
+        ("UNIT/INCHES", "inch", 25.4),
+        ("units / inch", "inch", 25.4),
+    ],
+)
+def test_units_record(tmp_path: Path, record: str, units: str, scale: float) -> None:
+    tp = cl(tmp_path, f"{record}\nFEDRAT/MMPM,100\nGOTO/1,2,3\n")
+    assert tp.units == units
+    np.testing.assert_allclose(tp.tip[0], np.array([1, 2, 3]) * scale)
+    assert tp.warnings == ()
+
+
+def test_units_inferred_from_ipm_and_mmpm(tmp_path: Path) -> None:
+    tp = cl(tmp_path, "RAPID\nGOTO/0,0,1\nFEDRAT/IPM,10\nGOTO/1,0,0\n")
+    assert tp.units == "inch"
+    np.testing.assert_allclose(tp.tip[1], [25.4, 0, 0])
+    assert "t.cls:3: no UNITS record: inch inferred from IPM feed" in tp.warnings[0]
+    tp = cl(tmp_path, "FEDRAT/MMPM,100\nGOTO/1,0,0\n")
+    assert tp.units == "mm" and tp.tip[0, 0] == 1.0
+
+
+def test_no_units_defaults_to_mm_with_warning(tmp_path: Path) -> None:
+    tp = cl(tmp_path, "FEDRAT/100\nGOTO/1,0,0\n")
+    assert tp.units == "mm" and tp.tip[0, 0] == 1.0
+    assert any("assuming mm" in w for w in tp.warnings)
+
+
+def test_units_override_wins(tmp_path: Path) -> None:
+    tp = cl(tmp_path, "UNITS/MM\nFEDRAT/100\nGOTO/1,0,0\n", units="inch")
+    assert tp.units == "inch"
+    np.testing.assert_allclose(tp.tip[0], [25.4, 0, 0])
+    assert tp.feed[0] == pytest.approx(2540.0)
+    assert any("UNITS/MM ignored" in w for w in tp.warnings)
+    tp = cl(tmp_path, "FEDRAT/IPM,10\nGOTO/1,0,0\n", units="mm")
+    assert tp.units == "mm" and tp.tip[0, 0] == 1.0 and tp.feed[0] == pytest.approx(254.0)
+
+
+def test_mixed_units_records_rejected(tmp_path: Path) -> None:
+    e = err(tmp_path, "UNITS/MM\nFEDRAT/100\nGOTO/1,0,0\nUNITS/INCHES\nGOTO/2,0,0\n")
+    assert e.line == 4 and "mixed units" in e.reason
+
+
+def test_bad_units_argument(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="units must be"):
+        read_cl(write(tmp_path, MM + "GOTO/0,0,0\n"), units="cm")  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- MULTAX
+
+
+def test_multax_on_off(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "MULTAX/ON\nGOTO/0,0,0,1,0,0\nGOTO/1,0,0\nMULTAX/OFF\nGOTO/2,0,0\n")
+    np.testing.assert_allclose(tp.axis, [[1, 0, 0], [1, 0, 0], [0, 0, 1]])
+
+
+def test_multax_off_rejects_tool_axis(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "MULTAX/OFF\nGOTO/0,0,0,1,0,0\n")
+    assert e.line == 4 and "MULTAX/OFF" in e.reason
+
+
+# --------------------------------------------------------------------------- MSYS / CSYS
+
+
+def rot_z(deg: float) -> np.ndarray:
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_msys_rotated_frame(tmp_path: Path) -> None:
+    # CL frame: origin (10, 20, 30), X = part +Y, Y = part -X (90 deg about Z)
+    tp = cl(tmp_path, MM + "MSYS/10,20,30,0,1,0,-1,0,0\nGOTO/1,2,3,1,0,0\nGOTO/0,0,0\n")
+    np.testing.assert_allclose(tp.tip[0], [10 - 2, 20 + 1, 30 + 3])
+    np.testing.assert_allclose(tp.axis[0], [0, 1, 0], atol=1e-15)
+    np.testing.assert_allclose(tp.tip[1], [10, 20, 30])
+    np.testing.assert_allclose(tp.axis[1], [0, 1, 0], atol=1e-15)  # axis carried in CL numbers
+
+
+def test_msys_tilted_frame_with_rounded_axes(tmp_path: Path) -> None:
+    # X tilted 30 deg about Y, written with 7 decimals as NX does: orthonormalised
+    tp = cl(tmp_path, MM + "MSYS/0,0,0,0.8660254,0.0000000,-0.5000000,0.0000000,1.0000000,0.0000000\nGOTO/0,0,0\n")
+    np.testing.assert_allclose(tp.axis[0], [0.5, 0, 0.8660254], atol=1e-7)
+
+
+def test_msys_inch_origin_and_reset(tmp_path: Path) -> None:
+    text = "UNITS/INCHES\nFEDRAT/10\nMSYS/1,0,0,1,0,0,0,1,0\nGOTO/1,0,0\nMSYS/0,0,0,1,0,0,0,1,0\nGOTO/1,0,0\n"
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip[:, 0], [50.8, 25.4])
+
+
+def test_csys_matrix(tmp_path: Path) -> None:
+    R = rot_z(90.0)
+    t = [5.0, 6.0, 7.0]
+    m = np.column_stack([R, t]).ravel()
+    tp = cl(tmp_path, MM + "CSYS/" + ",".join(f"{v:.10f}" for v in m) + "\nGOTO/1,0,0,1,0,0\n")
+    np.testing.assert_allclose(tp.tip[0], [5, 7, 7], atol=1e-9)
+    np.testing.assert_allclose(tp.axis[0], [0, 1, 0], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("record", "message"),
+    [
+        ("MSYS/0,0,0,1,0,0,0.1,0.995,0", "not orthogonal"),
+        ("MSYS/0,0,0,1,0,0,0,0,0", "zero length"),
+        ("MSYS/0,0,0,2,0,0,0,1,0", "not unit"),
+        ("MSYS/0,0,0,1,0,0", "MSYS needs 9 numbers"),
+        ("CSYS/1,0,0,0,0,1,0,0,0,0,-1,0", "right-handed"),
+        ("CSYS/1,0,0,0,0,1,0,0", "CSYS needs 12 numbers"),
+    ],
+)
+def test_bad_frames_rejected(tmp_path: Path, record: str, message: str) -> None:
+    e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")
+    assert e.line == 3 and message in e.reason
+
+
+def test_msys_property_random_frames(tmp_path: Path) -> None:
+    """1000 random orthonormal frames: output == origin + R p and R a (one file, one pose each)."""
+    rng = np.random.default_rng(20240611)
+    n = 1000
+    lines = ["UNITS/MM", "FEDRAT/MMPM,100"]
+    expected_tip, expected_axis = [], []
+    for _ in range(n):
+        q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+        R = q * np.sign(np.diag(r))
+        if np.linalg.det(R) < 0:
+            R[:, 2] *= -1
+        o = rng.uniform(-1000, 1000, 3)
+        p = rng.uniform(-500, 500, 3)
+        a = rng.normal(size=3)
+        a /= np.linalg.norm(a)
+        lines.append("MSYS/" + ",".join(repr(float(v)) for v in (*o, *R[:, 0], *R[:, 1])))
+        lines.append("GOTO/" + ",".join(repr(float(v)) for v in (*p, *a)))
+        expected_tip.append(o + R @ p)
+        expected_axis.append(R @ a)
+    tp = cl(tmp_path, "\n".join(lines) + "\n")
+    assert len(tp) == n
+    np.testing.assert_allclose(tp.tip, expected_tip, atol=1e-9)
+    np.testing.assert_allclose(tp.axis, expected_axis, atol=1e-12)
+
+
+# --------------------------------------------------------------------------- tools
+
+
+def test_tool_change_merge_nx_order(tmp_path: Path) -> None:
+    text = (
+        MM
+        + "TOOL PATH/OP1,TOOL,EM10\n"  # 3
+        + "TLDATA/MILL,10,0,75,0,0\n"  # 4: before the load
+        + "LOAD/TOOL,3,ADJUST,3\n"  # 5
+        + "SPINDL/RPM,5000,CLW\n"  # 6
+        + "GOTO/0,0,0\n"  # 7
+        + "TOOL PATH/OP2,TOOL,EM6\n"  # 8
+        + "LOAD/TOOL,4\n"  # 9
+        + "TLDATA/MILL,6,0,60,0,0\n"  # 10: after the load
+        + "GOTO/1,0,0\n"  # 11
+    )
+    tp = cl(tmp_path, text)
+    changes = events(tp, ToolChange)
+    assert changes == [
+        ToolChange(index=0, line=5, tool=3, length=75.0, diameter=10.0, adjust=3),
+        ToolChange(index=1, line=9, tool=4, length=60.0, diameter=6.0, adjust=None),
+    ]
+    assert tp.tool.tolist() == [3, 4]
+    kinds = [type(e).__name__ for e in tp.events]
+    assert kinds == ["Comment", "ToolChange", "Spindle", "Comment", "ToolChange"]
+    assert [c.text for c in events(tp, Comment)] == ["OP1 (tool EM10)", "OP2 (tool EM6)"]
+    assert tp.warnings == ()
+
+
+def test_tldata_inch_length_converted(tmp_path: Path) -> None:
+    tp = cl(tmp_path, "UNITS/INCHES\nFEDRAT/10\nLOAD/TOOL,2\nTLDATA/MILL,0.5,0,3.0\nGOTO/0,0,0\n")
+    (change,) = events(tp, ToolChange)
+    assert change.length == pytest.approx(76.2) and change.diameter == pytest.approx(12.7)
+
+
+def test_loadtl_select_cutter(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "LOADTL/5,LENGTH,80\nCUTTER/12,1\nGOTO/0,0,0\nSELECT/TOOL,7\nGOTO/1,0,0\n")
+    changes = events(tp, ToolChange)
+    assert [(c.tool, c.length, c.diameter, c.index) for c in changes] == [(5, 80.0, 12.0, 0), (7, None, None, 1)]
+    assert tp.tool.tolist() == [5, 7]
+
+
+def test_select_after_load_is_a_preselection(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "LOADTL/1\nSELECT/TOOL,2\nGOTO/0,0,0\n")
+    assert [c.tool for c in events(tp, ToolChange)] == [1]
+    assert tp.tool.tolist() == [1]
+
+
+def test_tool_zero_before_first_load_and_events_index(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/0,0,0\nGOTO/1,0,0\nLOAD/TOOL,9\nGOTO/2,0,0\nSTOP\n")
+    assert tp.tool.tolist() == [0, 0, 9]
+    (change,) = events(tp, ToolChange)
+    assert change.index == 2
+    (stop,) = events(tp, Stop)
+    assert stop.index == 3 and not stop.optional  # after the last motion: index N
+
+
+def test_cutter_alone_gives_tool_zero_change_with_warning(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "CUTTER/8\nGOTO/0,0,0\n")
+    (change,) = events(tp, ToolChange)
+    assert (change.tool, change.diameter, change.length) == (0, 8.0, None)
+    assert any("without a tool load" in w for w in tp.warnings)
+
+
+def test_bad_tool_number(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "LOAD/TOOL,2.5\nGOTO/0,0,0\n")
+    assert e.line == 3 and "tool number" in e.reason
+
+
+# --------------------------------------------------------------------------- spindle / coolant
+
+
+@pytest.mark.parametrize(
+    ("record", "rpm", "direction"),
+    [
+        ("SPINDL/RPM,1200,CLW", 1200.0, "CW"),
+        ("SPINDL/1200,RPM,CCLW", 1200.0, "CCW"),
+        ("SPINDL/RPM,800", 800.0, "CW"),
+        ("spindl / rpm , 950. , cclw", 950.0, "CCW"),
+    ],
+)
+def test_spindle_records(tmp_path: Path, record: str, rpm: float, direction: str) -> None:
+    tp = cl(tmp_path, MM + record + "\nGOTO/0,0,0\n")
+    assert events(tp, Spindle) == [Spindle(index=0, line=3, rpm=rpm, direction=direction)]  # type: ignore[arg-type]
+
+
+def test_spindle_off_and_on_reuses_last(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "SPINDL/RPM,3000,CCLW\nGOTO/0,0,0\nSPINDL/OFF\nSPINDL/ON\nGOTO/1,0,0\n")
+    got = [(s.rpm, s.direction, s.index) for s in events(tp, Spindle)]
+    assert got == [(3000.0, "CCW", 0), (0.0, "OFF", 1), (3000.0, "CCW", 1)]
+
+
+@pytest.mark.parametrize(
+    ("record", "message"),
+    [("SPINDL/ON", "without a previous"), ("SPINDL/SFM,300", "surface speed"), ("SPINDL/RPM,-5", "positive")],
+)
+def test_bad_spindle(tmp_path: Path, record: str, message: str) -> None:
+    e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")
+    assert e.line == 3 and message in e.reason
+
+
+@pytest.mark.parametrize("mode", ["ON", "OFF", "FLOOD", "MIST", "THRU"])
+def test_coolant_modes(tmp_path: Path, mode: str) -> None:
+    tp = cl(tmp_path, MM + f"COOLNT/{mode}\nGOTO/0,0,0\n")
+    assert events(tp, Coolant) == [Coolant(index=0, line=3, mode=mode)]  # type: ignore[arg-type]
+
+
+def test_unknown_coolant_mode_warns(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "COOLNT/AIR\nGOTO/0,0,0\n")
+    assert events(tp, Coolant) == []
+    assert any(":3: COOLNT/AIR" in w for w in tp.warnings)
+
+
+# --------------------------------------------------------------------------- CIRCLE
+
+
+def circle_file(axis: str, end: str, start: str = "10,0,0", extra: str = "", rec_axis: str = "") -> str:
+    return MM + f"GOTO/{start}{rec_axis}\nCIRCLE/0,0,0,{axis},10{extra}\nGOTO/{end}\n"
+
+
+def check_on_circle_and_sagitta(tp: Toolpath, r: float, tol: float) -> None:
+    xy = tp.tip[:, :2]
+    np.testing.assert_allclose(np.linalg.norm(xy, axis=1), r, atol=1e-9)
+    mid = 0.5 * (xy[1:] + xy[:-1])
+    sagitta = r - np.linalg.norm(mid, axis=1)
+    assert sagitta.max() <= tol * (1 + 1e-9)
+    assert sagitta.max() > tol / 4  # not grossly over-sampled
+
+
+def test_circle_quarter_ccw(tmp_path: Path) -> None:
+    tp = cl(tmp_path, circle_file("0,0,1", "0,10,0"))
+    assert len(tp) > 3  # never a single chord
+    check_on_circle_and_sagitta(tp, 10.0, 0.001)
+    ang = np.arctan2(tp.tip[:, 1], tp.tip[:, 0])
+    assert np.all(np.diff(ang) > 0)  # counter-clockwise about +Z
+    assert ang[-1] == pytest.approx(math.pi / 2)
+    assert (tp.line[1:] == 5).all() and tp.line[0] == 3  # arc poses carry the end GOTO's line
+    np.testing.assert_allclose(tp.tip[-1], [0, 10, 0])
+    assert (tp.feed == 100).all()
+
+
+def test_circle_negative_axis_goes_the_long_way(tmp_path: Path) -> None:
+    tp = cl(tmp_path, circle_file("0,0,-1", "0,10,0"))
+    check_on_circle_and_sagitta(tp, 10.0, 0.001)
+    ang = np.unwrap(np.arctan2(tp.tip[:, 1], tp.tip[:, 0]))
+    assert np.all(np.diff(ang) < 0)  # clockwise seen from +Z = CCW about -Z
+    assert ang[-1] - ang[0] == pytest.approx(-1.5 * math.pi)
+    assert tp.tip[:, 1].min() == pytest.approx(-10.0, abs=0.01)  # passes through (0,-10)
+
+
+def test_circle_nx_eleven_values_and_tolerance(tmp_path: Path) -> None:
+    coarse = cl(tmp_path, circle_file("0,0,1", "-10,0,0", extra=",0.01,0.5,8,0"), chordal_tolerance=0.05)
+    fine = cl(tmp_path, circle_file("0,0,1", "-10,0,0", extra=",0.01,0.5,8,0"), chordal_tolerance=0.001)
+    check_on_circle_and_sagitta(coarse, 10.0, 0.05)
+    check_on_circle_and_sagitta(fine, 10.0, 0.001)
+    assert len(fine) > len(coarse)
+    assert (coarse.tip[1:-1, 1] > 0).all()  # half circle through +Y
+
+
+def test_circle_full_and_helical(tmp_path: Path) -> None:
+    tp = cl(tmp_path, circle_file("0,0,1", "10,0,0"))
+    ang = np.unwrap(np.arctan2(tp.tip[:, 1], tp.tip[:, 0]))
+    assert ang[-1] - ang[0] == pytest.approx(2 * math.pi)
+    tp = cl(tmp_path, circle_file("0,0,1", "-10,0,5"))
+    ang = np.arctan2(tp.tip[:, 1], tp.tip[:, 0])
+    np.testing.assert_allclose(tp.tip[1:, 2], 5 * ang[1:] / math.pi, atol=1e-9)  # z linear in angle
+
+
+def test_circle_in_tilted_plane_and_inch(tmp_path: Path) -> None:
+    # circle about +X through (0,1,0) -> (0,0,1), inch: radius 1 in, tolerance in mm
+    text = "UNITS/INCHES\nFEDRAT/10\nGOTO/0,1,0\nCIRCLE/0,0,0,1,0,0,1\nGOTO/0,0,1\n"
+    tp = cl(tmp_path, text, chordal_tolerance=0.002)
+    yz = tp.tip[:, 1:]
+    np.testing.assert_allclose(np.linalg.norm(yz, axis=1), 25.4, atol=1e-9)
+    np.testing.assert_allclose(tp.tip[:, 0], 0, atol=1e-12)
+    sag = 25.4 - np.linalg.norm(0.5 * (yz[1:] + yz[:-1]), axis=1)
+    assert sag.max() <= 0.002 * (1 + 1e-9)
+    assert np.all(np.diff(np.arctan2(yz[:, 1], yz[:, 0])) > 0)  # y -> z is CCW about +X
+
+
+def test_circle_axis_slerp(tmp_path: Path) -> None:
+    s = math.sin(math.radians(30))
+    c = math.cos(math.radians(30))
+    text = MM + f"GOTO/10,0,0,0,0,1\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0,{s},0,{c}\n"
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-12)
+    tilt = np.degrees(np.arccos(np.clip(tp.axis[:, 2], -1, 1)))
+    assert np.all(np.diff(tilt) > 0)
+    np.testing.assert_allclose(tilt[[0, -1]], [0, 30], atol=1e-9)
+    np.testing.assert_allclose(np.diff(tilt), np.diff(tilt)[0], atol=1e-9)  # constant angular rate
+    assert (tp.axis[:, 1] == 0).all()
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "message"),
+    [
+        (MM + "GOTO/12,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0\n", 4, "arc start point"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,11,0\n", 5, "arc end point"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,0,10\nGOTO/0,10,0\n", 4, "circle axis has zero length"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1\nGOTO/0,10,0\n", 4, "CIRCLE needs 7 to 11 numbers"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\n", 4, "not followed by the GOTO"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOHOME\n", 5, "must be followed by a GOTO"),
+        (MM + "CIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0\n", 3, "no current position"),
+    ],
+)
+def test_bad_circles(tmp_path: Path, text: str, line: int, message: str) -> None:
+    e = err(tmp_path, text)
+    assert e.line == line and message in e.reason
+
+
+# --------------------------------------------------------------------------- FROM / GOHOME
+
+
+def test_from_first_pose_rapid_and_gohome(tmp_path: Path) -> None:
+    text = "UNITS/MM\nFROM/0,0,200\nFEDRAT/MMPM,100\nGOTO/10,0,0,1,0,0\nGOHOME\n"
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[0, 0, 200], [10, 0, 0], [0, 0, 200]])
+    np.testing.assert_allclose(tp.axis[2], [0, 0, 1])
+    assert tp.rapid.tolist() == [True, False, True]
+    assert tp.line.tolist() == [2, 4, 5]
+
+
+def test_gohome_without_from(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "GOTO/0,0,0\nGOHOME\n")
+    assert (e.reason, e.line) == ("GOHOME without a FROM position", 4)
+
+
+def test_godlta_and_tlaxis(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "TLAXIS/1,0,0\nGOTO/0,0,0\nGODLTA/5\nGODLTA/0,1,0\n")
+    np.testing.assert_allclose(tp.tip, [[0, 0, 0], [5, 0, 0], [5, 1, 0]])
+    np.testing.assert_allclose(tp.axis, [[1, 0, 0]] * 3)
+
+
+# --------------------------------------------------------------------------- text records, ignored records
+
+
+def test_partno_pprint_insert_stop(tmp_path: Path) -> None:
+    text = MM + "PARTNO/BRACKET $$ 7\nPPRINT/ HELLO, WORLD $ \nINSERT/M08\nSTOP\nOPSTOP\nGOTO/0,0,0\n"
+    tp = cl(tmp_path, text)
+    assert tp.part_name == "BRACKET $$ 7"  # text records are literal
+    assert [c.text for c in events(tp, Comment)] == ["HELLO, WORLD $", "M08"]
+    assert [s.optional for s in events(tp, Stop)] == [False, True]
+    assert any(":5: INSERT/M08: not executed" in w for w in tp.warnings)
+
+
+def test_display_records_ignored_silently(tmp_path: Path) -> None:
+    text = MM + (
+        "PAINT/COLOR,4\nDISPLY/ON\nPEN/1\nAUTOPS\nCLRSRF/NORMAL,10\nOPERATION/ROUGH\nGOTO/0,0,0\nEND-OF-PATH\nEND\n"
+    )
+    tp = cl(tmp_path, text)
+    assert tp.warnings == () and len(tp) == 1
+
+
+def test_fini_stops_parsing(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/0,0,0\nFINI\nGOTO/1,2\ngarbage?!\n")
+    assert len(tp) == 1 and tp.warnings == ()
+
+
+def test_unknown_record_warning(tmp_path: Path) -> None:
+    path = write(tmp_path, MM + "GOTO/0,0,0\nFOOBAR/1,2\nWIDGET\nGOTO/1,0,0\n")
+    tp = read_cl(path)
+    assert len(tp) == 2
+    assert tp.warnings == (f"{path}:4: unknown record 'FOOBAR' ignored", f"{path}:5: unknown record 'WIDGET' ignored")
+
+
+@pytest.mark.parametrize(
+    ("record", "message"),
+    [("ORIGIN/1,2,3", "ORIGIN"), ("GOFWD/S1", "GOFWD"), ("CUTCOM/LEFT", "cutter radius compensation")],
+)
+def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
+    e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")
+    assert e.line == 3 and message in e.reason
+
+
+def test_cutcom_off_is_harmless(tmp_path: Path) -> None:
+    assert cl(tmp_path, MM + "CUTCOM/OFF\nGOTO/0,0,0\n").warnings == ()
+
+
+# --------------------------------------------------------------------------- lexical details
+
+
+def test_comments_continuation_whitespace_case_numbers(tmp_path: Path) -> None:
+    text = (
+        "$$ header comment\n"  # 1
+        "units / mm\n"  # 2
+        "fedrat / mmpm , 100 $$ trailing\n"  # 3
+        "goto / 25. , .984808 , -.5\n"  # 4
+        "GOTO/1e-3, 1.E+02 ,\t-2.5E-1 $$ comment\n"  # 5
+        "GOTO/1.0,$\n"  # 6
+        "   2.0,$   $$ note\n"  # 7
+        "\n"  # 8: blank line inside a continued record is skipped
+        "3.0\n"  # 9
+        "  GOTO/4,5,6\n"  # 10
+    )
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[25, 0.984808, -0.5], [0.001, 100, -0.25], [1, 2, 3], [4, 5, 6]])
+    assert tp.line.tolist() == [4, 5, 6, 10]
+    assert tp.warnings == ()
+
+
+def test_crlf_and_cr_line_endings(tmp_path: Path) -> None:
+    for eol in ("\r\n", "\r"):
+        tp = cl(tmp_path, (MM + "GOTO/0,0,0\nJUNK\nGOTO/1,0,0\n").replace("\n", eol))
+        assert tp.line.tolist() == [3, 5]
+        assert any(":4: unknown record 'JUNK'" in w for w in tp.warnings)
+
+
+def test_nx_information_listing_header_and_trailer(tmp_path: Path) -> None:
+    header = (
+        "==============================================================\n"
+        "Information listing created by :  jdoe\n"
+        "Date                           :  Mon Feb 03 10:00:00 2020\n"
+        "Current work part              :  C:/parts/model1.prt\n"
+        "Node name                      :  pc-123\n"
+        "==============================================================\n"
+    )
+    tp = cl(tmp_path, header + MM + "GOTO/0,0,0\nEND-OF-PATH\nTool Path Listing has 12 lines.")
+    assert tp.warnings == () and tp.line.tolist() == [9]
+    # the header patterns are only skipped before the first record
+    tp = cl(tmp_path, MM + "GOTO/0,0,0\nNode name : pc-123\n")
+    assert any("unknown record 'Node name : pc-123'" in w for w in tp.warnings)
+
+
+# --------------------------------------------------------------------------- CYCLE
+
+
+def drill_file(cycle: str, head: str = "UNITS/MM", top: str = "20,100,10") -> str:
+    return (
+        f"{head}\nSPINDL/RPM,1000,CLW\nFEDRAT/MMPM,500\nRAPID\nGOTO/0,0,50\n"
+        f"{cycle}\nGOTO/{top}\nGOTO/30,100,10\nCYCLE/OFF\nGOTO/30,100,50\n"
+    )
+
+
+@pytest.mark.parametrize(
+    "cycle",
+    [
+        "CYCLE/DRILL,RAPTO,3.0000,FEDTO,-10.0000,RTRCTO,AUTO,MMPM,250.0000",  # NX
+        "CYCLE/DRILL,10,FEDRAT,MMPM,250,CLEAR,3",
+        "CYCLE/DRILL,DEPTH,10,FEDRAT,250,RAPTO,3",
+        "CYCLE/DRILL,10,MMPM,250,3",  # classic APT: depth, unit, feed, clearance
+        "CYCLE/DRILL, FEDTO, 10, MMPM, 250, CLEAR, 3",  # Fusion-style
+    ],
+)
+def test_drill_cycle_expanded(tmp_path: Path, cycle: str) -> None:
+    tp = cl(tmp_path, drill_file(cycle))
+    np.testing.assert_allclose(
+        tp.tip,
+        [[0, 0, 50], [20, 100, 13], [20, 100, 0], [20, 100, 13], [30, 100, 13], [30, 100, 0], [30, 100, 13],
+         [30, 100, 50]],
+    )  # fmt: skip
+    assert tp.rapid.tolist() == [True, True, False, True, True, False, True, False]
+    np.testing.assert_allclose(tp.feed[~tp.rapid], [250, 250, 500])
+    assert tp.line.tolist() == [5, 7, 7, 7, 8, 8, 8, 10]
+
+
+def test_drill_cycle_inch_classic_and_tilted_axis(tmp_path: Path) -> None:
+    text = "UNITS/INCHES\nFEDRAT/IPM,10\nGOTO/0,0,2,0.6,0,0.8\nCYCLE/DRILL,.5,20.,IPM,.1\nGOTO/1,0,0\nCYCLE/OFF\n"
+    tp = cl(tmp_path, text)
+    a = np.array([0.6, 0, 0.8])
+    top = np.array([25.4, 0, 0])
+    np.testing.assert_allclose(tp.tip[1:], [top + 2.54 * a, top - 12.7 * a, top + 2.54 * a], atol=1e-12)
+    assert tp.feed[2] == pytest.approx(508.0)
+
+
+def test_drill_cycle_on_reuses_last(tmp_path: Path) -> None:
+    text = MM + "CYCLE/DRILL,5,MMPM,50,2\nGOTO/0,0,0\nCYCLE/OFF\nGOTO/9,9,9\nCYCLE/ON\nGOTO/1,0,0\nCYCLE/OFF\n"
+    tp = cl(tmp_path, text)
+    assert len(tp) == 7
+    np.testing.assert_allclose(tp.tip[4:, 2], [2, -5, 2])
+
+
+@pytest.mark.parametrize(
+    ("cycle", "message"),
+    [
+        ("CYCLE/DEEP,10,2,MMPM,250,3", "peck drilling"),
+        ("CYCLE/BRKCHP,10,2,MMPM,250,3", "chip-breaking"),
+        ("CYCLE/DRILL,DEEP,RAPTO,3,FEDTO,-10,STEP,2,MMPM,250", "peck drilling"),
+        ("CYCLE/DRILL,BRKCHP,RAPTO,3,FEDTO,-10,MMPM,250", "chip-breaking"),
+        ("CYCLE/TAP,10,MMPR,1.5,3", "tapping"),
+        ("CYCLE/DRILL,10,MMPM,250,3,DWELL,2", "dwell"),
+        ("CYCLE/DRILL,RAPTO,3,FEDTO,-10,STEP,2", "this CYCLE/DRILL form is not supported"),
+        ("CYCLE/DRILL,10,MMPM,250", "no clearance"),
+        ("CYCLE/DRILL,CLEAR,3,MMPM,250", "no depth"),
+        ("CYCLE/WHIRL,1", "CYCLE/WHIRL is not supported"),
+    ],
+)
+def test_unsupported_cycles_rejected(tmp_path: Path, cycle: str, message: str) -> None:
+    e = err(tmp_path, drill_file(cycle))
+    assert e.line == 6 and message in e.reason
+
+
+# --------------------------------------------------------------------------- malformed input
+
+
+@pytest.mark.parametrize(
+    ("body", "reason"),
+    [
+        ("GOTO/1,2", "GOTO needs 3 or 6 numbers, got 2"),
+        ("GOTO/", "GOTO needs 3 or 6 numbers, got 0"),
+        ("GOTO/1.2x3,0,0", "'1.2x3' is not a number"),
+        ("GOTO/1,2,abc", "'abc' is not a number"),
+        ("GOTO/1_0,2,3", "'1_0' is not a number"),
+        ("GOTO/1,,3", "empty field in GOTO"),
+        ("GOTO/nan,2,3", "NaN in GOTO"),
+        ("GOTO/1,2,3,0,NaN,1", "NaN in GOTO"),
+        ("GOTO/inf,2,3", "infinite value in GOTO"),
+        ("GOTO/1,2,3,0,0,-Infinity", "infinite value in GOTO"),
+        ("GOTO/1,2,3,0,0,0", "tool axis has zero length"),
+        ("GOTO/1,2,3,0,0,5", "tool axis has length 5, expected a unit vector"),
+        ("FROM/1,2", "FROM needs 3 or 6 numbers, got 2"),
+        ("GOTO/1e300,0,0", "coordinate out of range in GOTO (|value| > 1e+07)"),
+    ],
+)
+def test_malformed_goto(tmp_path: Path, body: str, reason: str) -> None:
+    e = err(tmp_path, MM + "GOTO/0,0,0\n" + body + "\nGOTO/1,1,1\n")
+    assert (e.reason, e.line) == (reason, 4)
+    assert str(e) == f"{e.source}:4: {reason}"
+
+
+def test_first_error_wins_over_later_ones(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "GOTO/0,0,nan\nGOTO/1,2\n")
+    assert (e.reason, e.line) == ("NaN in GOTO", 3)
+
+
+@pytest.mark.parametrize("text", ["", "\n\n", "$$ only a comment\nUNITS/MM\nFEDRAT/100\nEND-OF-PATH\n"])
+def test_no_motion(tmp_path: Path, text: str) -> None:
+    e = err(tmp_path, text)
+    assert (e.reason, e.line) == ("no motion records in file", None)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [b"GOTO/1,2,3\n\x00\x01\x02binary", b"\x81\x8d\x8f\x90\x9d GOTO", b"\x7fELF\x02\x01\x01\x03\x04"],
+)
+def test_binary_file_rejected(tmp_path: Path, data: bytes) -> None:
+    path = tmp_path / "b.cls"
+    path.write_bytes(data)
+    with pytest.raises(InputError) as info:
+        read_cl(path)
+    assert info.value.reason.startswith("not a text CL file")
+
+
+def test_unbalanced_continuation_at_eof(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + "GOTO/0,0,0\nGOTO/1,2,$\n$$ comment\n")
+    assert e.line == 4 and "continuation" in e.reason
+
+
+def test_missing_file() -> None:
+    with pytest.raises(InputError, match="file not found"):
+        read_cl("/nonexistent/x.cls")
+
+
+def test_bad_chordal_tolerance(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="chordal tolerance"):
+        cl(tmp_path, MM + "GOTO/0,0,0\n", chordal_tolerance=0.0)
+
+
+def test_utf8_bom_and_cp1252_comment(tmp_path: Path) -> None:
+    path = tmp_path / "w.cls"
+    path.write_bytes(b"\xef\xbb\xbfUNITS/MM\nFEDRAT/100\nPPRINT/\xc3\x98 8 mm\nGOTO/0,0,0\n")
+    assert events(read_cl(path), Comment)[0].text == "\u00d8 8 mm"
+    path.write_bytes(b"UNITS/MM\nFEDRAT/100\nPPRINT/\xd8 8 mm\nGOTO/0,0,0\n")
+    assert events(read_cl(path), Comment)[0].text == "\u00d8 8 mm"
+    path.write_bytes("UNITS/MM\r\nFEDRAT/100\r\nPPRINT/\u00d8 8 mm\r\nGOTO/0,0,0\r\n".encode("utf-16"))
+    tp = read_cl(path)
+    assert events(tp, Comment)[0].text == "\u00d8 8 mm" and tp.line.tolist() == [4]
+
+
+# --------------------------------------------------------------------------- CSV
+
+
+def test_csv_any_order_case_whitespace(tmp_path: Path) -> None:
+    path = write(tmp_path, " K , x,Y ,z,i,J, Feed \n1,1,2,3,0,0,500\n\n# note\n0,4,5,6,0,1,\n", "p.csv")
+    tp = read_pose_csv(path)
+    np.testing.assert_allclose(tp.tip, [[1, 2, 3], [4, 5, 6]])
+    np.testing.assert_allclose(tp.axis, [[0, 0, 1], [0, 1, 0]])
+    assert tp.feed[0] == 500 and np.isnan(tp.feed[1])
+    assert tp.line.tolist() == [2, 5]
+    assert not tp.rapid.any() and not tp.inverse_time.any() and (tp.tool == 0).all()
+    assert tp.units == "mm" and tp.events == ()
+
+
+def test_csv_without_feed_and_inch(tmp_path: Path) -> None:
+    path = write(tmp_path, "x,y,z,i,j,k\n1,0,0,0,0,1.0e-0\n", "p.csv")
+    tp = read_pose_csv(path, units="inch")
+    np.testing.assert_allclose(tp.tip, [[25.4, 0, 0]])
+    assert np.isnan(tp.feed).all() and tp.units == "inch"
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "message"),
+    [
+        ("x,y,z,i,j\n1,2,3,0,0\n", 1, "lacks column(s) k"),
+        ("x,y,z,i,j,k,speed\n", 1, "unknown column 'speed'"),
+        ("x,y,z,i,j,k,x\n", 1, "appears twice"),
+        ("x,y,z,i,j,k\n1,2,3,0,0\n", 2, "row has 5 fields"),
+        ("x,y,z,i,j,k\n1,2,3,0,0,1\n1,2,3q,0,0,1\n", 3, "'3q' is not a number"),
+        ("x,y,z,i,j,k\n1,2,nan,0,0,1\n", 2, "NaN in pose"),
+        ("x,y,z,i,j,k\n1,2,3,0,0,0\n", 2, "tool axis has zero length"),
+        ("x,y,z,i,j,k,feed\n1,2,3,0,0,1,-3\n", 2, "feed must be positive"),
+        ("x,y,z,i,j,k\n", None, "no poses in file"),
+    ],
+)
+def test_csv_errors(tmp_path: Path, text: str, line: int | None, message: str) -> None:
+    path = write(tmp_path, text, "p.csv")
+    with pytest.raises(InputError) as info:
+        read_pose_csv(path)
+    assert info.value.line == line and message in info.value.reason
+
+
+def test_read_toolpath_dispatch(tmp_path: Path) -> None:
+    csv = write(tmp_path, "x,y,z,i,j,k\n1,2,3,0,0,1\n", "poses.CSV")
+    assert read_toolpath(csv).rapid.tolist() == [False]
+    assert len(read_toolpath(csv, units="mm", chordal_tolerance=0.01)) == 1
+    clf = write(tmp_path, MM + "RAPID\nGOTO/1,2,3\n", "prog.cls")
+    assert read_toolpath(clf, units="mm").rapid.tolist() == [True]
+    assert len(read_toolpath(VARIABLE_AXIS)) == 348

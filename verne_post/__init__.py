@@ -1,0 +1,29 @@
+"""verne-post: postprocessor for the VERNE hybrid parallel/serial 5-axis machine tool.
+
+Library entry points (mm, radians inside arrays; table frame for tool poses)::
+
+    machine = verne_post.load_machine()            # the shipped VERNE, or a YAML path
+    ik = verne_post.inverse_kinematics(machine, tip, axis)
+    fk = verne_post.forward_kinematics(machine, ik.joints)
+"""
+
+from .api import (
+    FKResult,
+    IKResult,
+    Status,
+    forward_kinematics,
+    forward_kinematics_all,
+    inverse_kinematics,
+    inverse_kinematics_all,
+    inverse_kinematics_pairs,
+    within_limits,
+)
+from .kinematics import module_fk_all, module_fk_working, module_ik_all, module_ik_working
+from .machine import Geometry, Machine, load_machine
+
+__all__ = [
+    "FKResult", "Geometry", "IKResult", "Machine", "Status", "forward_kinematics", "forward_kinematics_all",
+    "inverse_kinematics", "inverse_kinematics_all", "inverse_kinematics_pairs", "load_machine", "module_fk_all",
+    "module_fk_working", "module_ik_all", "module_ik_working", "within_limits",
+]
+__version__ = "0.1.0"

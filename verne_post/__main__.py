@@ -1,0 +1,5 @@
+"""``python -m verne_post`` is the ``verne-post`` command."""
+
+from .cli import main
+
+main()

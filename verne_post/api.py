@@ -1,0 +1,208 @@
+"""The library's front door: kinematics of a :class:`Machine` with its limits and margins.
+
+Units: tips in mm and axes as unit vectors in the table frame; joints (N, 5) = rho1..3 in mm
+and theta1, theta2 in radians (degrees only at the CLI, YAML and file interfaces).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from enum import IntEnum
+
+import numpy as np
+
+from .kinematics import (
+    MachineFKSolutions,
+    MachineIK,
+    MachineIKSolutions,
+    Margins,
+    machine_fk_all,
+    machine_fk_working,
+    machine_ik_all,
+    machine_ik_working,
+    margins,
+    unwrap_near,
+)
+from .machine import Machine
+
+
+class Status(IntEnum):
+    """Per-pose outcome; a pose gets the most severe that applies (unreachable first)."""
+
+    OK = 0
+    UNREACHABLE = 1
+    OUT_OF_LIMITS = 2
+    SINGULAR = 3
+
+    @property
+    def label(self) -> str:
+        return self.name.lower().replace("_", " ")
+
+
+JOINT_NAMES = ("rho1", "rho2", "rho3", "theta1", "theta2")
+
+
+def joint_bounds(machine: Machine) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper), each (5,), in mm and rad; +-inf for a continuous rotary."""
+    lower, upper = [], []
+    for name in JOINT_NAMES:
+        j = getattr(machine.joints, name)
+        scale = 1.0 if name.startswith("rho") else np.pi / 180.0
+        lower.append(-np.inf if j.continuous else j.min * scale)
+        upper.append(np.inf if j.continuous else j.max * scale)
+    return np.array(lower), np.array(upper)
+
+
+def within_limits(machine: Machine, joints: np.ndarray) -> np.ndarray:
+    """True where every joint of (N, 5) (mm, rad) is inside the machine's travel."""
+    lower, upper = joint_bounds(machine)
+    return np.all((joints >= lower) & (joints <= upper), axis=-1)
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Working-mode inverse kinematics of N tool poses."""
+
+    joints: np.ndarray  # (N, 5) rho1..3 mm, theta1, theta2 rad (NaN where unreachable)
+    alpha: np.ndarray  # (N,) platform tilt, rad
+    phi: np.ndarray  # (N, 2) tool-axis angles (phi1, phi2), rad
+    pair: np.ndarray  # (N,) angle pair used: +1 or -1
+    status: np.ndarray  # (N,) Status values
+    margins: Margins  # (N,) each, NaN where unreachable
+
+    def take(self, mask: np.ndarray, other: IKResult) -> IKResult:
+        """Rows of ``self`` where ``mask``, of ``other`` elsewhere."""
+        return _fieldwise(lambda a, b: np.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b), self, other)
+
+    def rows(self, index: np.ndarray) -> IKResult:
+        """The solutions of poses ``index`` (an index array or mask)."""
+        return _fieldwise(lambda a: a[index], self)
+
+    def scatter(self, index: np.ndarray, part: IKResult) -> IKResult:
+        """A copy with rows ``index`` replaced by ``part``."""
+        def put(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            out = a.copy()
+            out[index] = b
+            return out
+
+        return _fieldwise(put, self, part)
+
+    def with_joints(self, joints: np.ndarray) -> IKResult:
+        return replace(self, joints=joints)
+
+
+def pose_margins(machine: Machine, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray,
+                 reachable: np.ndarray, tool_length: float = 0.0) -> Margins:
+    """Margins of N poses (NaN where not reachable); joints mm/rad, platform mm, alpha rad."""
+    n = len(alpha)
+    out = [np.full(n, np.nan) for _ in Margins.__dataclass_fields__]
+    if reachable.any():
+        found = margins(machine.kinematic_geometry(tool_length), joints[reachable], platform[reachable],
+                        alpha[reachable])
+        for array, name in zip(out, Margins.__dataclass_fields__, strict=False):
+            array[reachable] = getattr(found, name)
+    return Margins(*out)
+
+
+def classify(machine: Machine, joints: np.ndarray, reachable: np.ndarray, found: Margins) -> np.ndarray:
+    """Status (N,) int8: unreachable, else out of limits (travel, leg I rod clearance), else singular."""
+    status = np.full(len(reachable), Status.OK, dtype=np.int8)
+    t = machine.singularity
+    status[(found.serial < t.serial_min) | (found.parallel < t.parallel_min) | (found.machine < t.machine_min)] = (
+        Status.SINGULAR)
+    status[reachable & (~within_limits(machine, np.nan_to_num(joints)) | (found.rod_clearance < t.rod_clearance_min))
+           ] = Status.OUT_OF_LIMITS
+    status[~reachable] = Status.UNREACHABLE
+    return status
+
+
+def _fieldwise(function: Callable[..., np.ndarray], *results: IKResult) -> IKResult:
+    """Apply ``function`` to each array field (margins included) of one or more results."""
+    fields = {f: function(*(getattr(r, f) for r in results)) for f in IKResult.__dataclass_fields__ if f != "margins"}
+    found = Margins(*(function(*(getattr(r.margins, f) for r in results)) for f in Margins.__dataclass_fields__))
+    return IKResult(**fields, margins=found)
+
+
+def _status(machine: Machine, ik: MachineIK, pair: int, tool_length: float) -> IKResult:
+    found = pose_margins(machine, ik.joints, ik.platform, ik.alpha, ik.reachable, tool_length)
+    status = classify(machine, ik.joints, ik.reachable, found)
+    return IKResult(ik.joints, ik.alpha, ik.phi, np.full(len(ik.alpha), pair, np.int8), status, found)
+
+
+def _as_poses(tip: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    tip = np.atleast_2d(np.asarray(tip, dtype=float))
+    axis = np.atleast_2d(np.asarray(axis, dtype=float))
+    if tip.shape != axis.shape or tip.shape[-1] != 3:
+        raise ValueError("tip and axis must both be (N, 3)")
+    norm = np.linalg.norm(axis, axis=-1, keepdims=True)
+    if np.any(norm == 0) or not np.all(np.isfinite(norm)) or not np.all(np.isfinite(tip)):
+        raise ValueError("tool tip and axis must be finite and the axis of non-zero length")
+    return tip, axis / norm
+
+
+def inverse_kinematics_pairs(machine: Machine, tip: np.ndarray, axis: np.ndarray, *, tool_length: float = 0.0,
+                             theta2_at_pole: np.ndarray | float = 0.0) -> tuple[IKResult, IKResult]:
+    """Working-mode IK for both tool-axis angle pairs (+1, -1); tip (N, 3) mm, axis (N, 3), table frame.
+
+    ``theta2_at_pole`` (rad) is used where the axis is along the table normal.
+    """
+    tip, axis = _as_poses(tip, axis)
+    geom = machine.kinematic_geometry(tool_length)
+    plus, minus = (machine_ik_working(geom, tip, axis, pair=p, theta2_at_pole=theta2_at_pole) for p in (1, -1))
+    return _status(machine, plus, 1, tool_length), _status(machine, minus, -1, tool_length)
+
+
+def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
+                       theta2_hint: np.ndarray | float | None = None, *, tool_length: float = 0.0) -> IKResult:
+    """Working-mode IK of N tool poses: tip (N, 3) mm, axis (N, 3) unit, both in the table frame.
+
+    Of the two angle pairs, the one with the better status is taken (ok, then singular, then
+    out of limits); between equals the
+    one whose theta2 is nearest ``theta2_hint`` (rad), or without a hint the one with the
+    smaller |theta1|. theta2 is returned unwrapped to within pi of the hint; on the pole
+    (axis along the table normal) theta2 = hint (0 without one).
+    """
+    hint = 0.0 if theta2_hint is None else theta2_hint
+    plus, minus = inverse_kinematics_pairs(machine, tip, axis, tool_length=tool_length, theta2_at_pole=hint)
+
+    def cost(r: IKResult) -> np.ndarray:
+        theta1, theta2 = r.joints[:, 3], r.joints[:, 4]
+        preference = np.abs(theta1) if theta2_hint is None else np.abs(unwrap_near(theta2, hint) - hint)
+        penalty = np.array([0.0, 1e9, 1e6, 1e3])[r.status]  # by Status: ok, unreachable, limits, singular
+        return penalty + np.nan_to_num(preference, nan=0.0)
+
+    chosen = plus.take(cost(plus) <= cost(minus), minus)
+    joints = chosen.joints.copy()
+    joints[:, 4] = unwrap_near(joints[:, 4], hint)
+    return chosen.with_joints(joints)
+
+
+def inverse_kinematics_all(machine: Machine, tip: np.ndarray, axis: np.ndarray, *, tool_length: float = 0.0,
+                           theta2_at_pole: float = 0.0) -> MachineIKSolutions:
+    """Every IK solution (both angle pairs, all working modes) of N poses, table frame, mm."""
+    tip, axis = _as_poses(tip, axis)
+    return machine_ik_all(machine.kinematic_geometry(tool_length), tip, axis, theta2_at_pole=theta2_at_pole)
+
+
+@dataclass(frozen=True)
+class FKResult:
+    """Working-mode forward kinematics of N joint sets."""
+
+    tip: np.ndarray  # (N, 3) mm, table frame (NaN where the sliders admit no working assembly)
+    axis: np.ndarray  # (N, 3) unit, table frame
+    alpha: np.ndarray  # (N,) rad
+    platform: np.ndarray  # (N, 3) mm, base frame
+    reachable: np.ndarray  # (N,) bool
+
+
+def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: float = 0.0) -> FKResult:
+    """Tool tip (mm) and axis in the table frame, machine's assembly mode, for joints (N, 5) mm/rad."""
+    joints = np.atleast_2d(np.asarray(joints, dtype=float))
+    fk = machine_fk_working(machine.kinematic_geometry(tool_length), joints)
+    return FKResult(fk.tip, fk.axis, fk.alpha, fk.platform, fk.reachable)
+
+
+def forward_kinematics_all(machine: Machine, joints: np.ndarray, *, tool_length: float = 0.0) -> MachineFKSolutions:
+    """Every assembly mode of N joint sets (mm, rad): tips mm and axes in the table frame."""
+    return machine_fk_all(machine.kinematic_geometry(tool_length), np.atleast_2d(np.asarray(joints, dtype=float)))

@@ -1,0 +1,305 @@
+"""Whole VERNE (paper section 4): tool pose in the table frame <-> joints.
+
+Frames and units: the tool pose is given in the table frame R_t (Table IV): ``tip`` (N, 3) mm
+is the tool centre point U, ``axis`` (N, 3) the unit tool axis from the tip towards the
+spindle (APT i, j, k). Joints (N, 5) = (rho1, rho2, rho3) mm, (theta1, theta2) rad; the tilt
+alpha of the platform (rad) and the tool-axis angles (phi1, phi2) (rad) come along.
+
+Every axis has two angle pairs, (phi1, phi2) and (-phi1, phi2 + pi) (``pair`` = +1 / -1);
+theta2 = -phi2 (eq. 26), alpha = theta1 + phi1 (eq. 30). At phi1 = 0 (axis along the table
+normal) phi2 and so theta2 are free: the caller's ``theta2`` value is used there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..machine import Geometry
+from .module import (
+    is_working_mode,
+    module_fk_all,
+    module_fk_working,
+    solutions_for_alpha,
+)
+from .trigpoly import TrigPoly, real_half_angle_roots
+
+#: Below this sin(phi1) the axis is taken as the table normal (theta2 from the caller).
+POLE_EPS = 1e-12
+
+
+def wrap_angle(angle: np.ndarray) -> np.ndarray:
+    """Angle (rad) wrapped to [-pi, pi)."""
+    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def unwrap_near(angle: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """The angle (rad) equal to ``angle`` modulo 2 pi that is nearest to ``reference`` (rad)."""
+    return reference + wrap_angle(np.asarray(angle) - reference)
+
+
+def axis_angles(axis: np.ndarray, pair: np.ndarray | int = 1, theta2_at_pole: np.ndarray | float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(phi1, phi2) in rad of unit tool axes (N, 3), table frame, for angle pair +1 or -1.
+
+    axis = (sin phi1 sin phi2, -sin phi1 cos phi2, cos phi1). Pair +1 has phi1 in [0, pi];
+    pair -1 is (-phi1, phi2 + pi). On the pole phi2 = -theta2_at_pole.
+    """
+    axis = np.asarray(axis, dtype=float)
+    i, j, k = axis[..., 0], axis[..., 1], axis[..., 2]
+    sin_phi1 = np.hypot(i, j)
+    phi1 = np.arctan2(sin_phi1, k)
+    phi2 = np.where(sin_phi1 > POLE_EPS, np.arctan2(i, -j), -np.asarray(theta2_at_pole, dtype=float))
+    pair = np.asarray(pair)
+    at_pole = sin_phi1 <= POLE_EPS
+    phi2 = np.where((pair < 0) & ~at_pole, phi2 + np.pi, phi2)
+    return np.where(pair < 0, -phi1, phi1), wrap_angle(phi2)
+
+
+def axis_from_angles(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
+    """Unit tool axis (N, 3), table frame, from (phi1, phi2) in rad."""
+    s1 = np.sin(phi1)
+    return np.stack([s1 * np.sin(phi2), -s1 * np.cos(phi2), np.cos(phi1) + 0.0 * phi2], axis=-1)
+
+
+def _tilted_platform(geom: Geometry, tip: np.ndarray, axis: np.ndarray, phi2: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vx, vy, vz): platform centre P (mm) in the tilt frame after Tz(da) Rx(theta1).
+
+    P in the table frame is tip + Delta axis; theta2 = -phi2 turns it into the tilt frame:
+    v = (0, 0, dt) + Rx(pi) Rz(-phi2) (tip + Delta axis). Then P in the base frame is
+    (vx, cos t1 vy - sin t1 vz, da + sin t1 vy + cos t1 vz).
+    """
+    p = tip + geom.delta * axis
+    c2, s2 = np.cos(phi2), np.sin(phi2)
+    return c2 * p[:, 0] + s2 * p[:, 1], s2 * p[:, 0] - c2 * p[:, 1], geom.dt - p[:, 2]
+
+
+def _platform_coefficients(geom: Geometry, tip: np.ndarray, axis: np.ndarray, phi1: np.ndarray,
+                           phi2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xP, A, B) with yP = A cos(alpha) + B sin(alpha), zP = da - B cos(alpha) + A sin(alpha)."""
+    vx, vy, vz = _tilted_platform(geom, tip, axis, phi2)
+    c1, s1 = np.cos(phi1), np.sin(phi1)
+    return vx, vy * c1 + vz * s1, vy * s1 - vz * c1
+
+
+def _coupling(geom: Geometry, x1: np.ndarray, a: np.ndarray, b: np.ndarray, c, s):
+    """Eq. 31 with alpha = theta1 + phi1 as unknown: trigonometric degree 3 (sextic in tan(alpha/2))."""
+    g = geom
+    k = g.L1**2 - g.R1**2 - g.r1**2
+    y = a * c + b * s
+    return g.R1**2 * (s * s) * (x1**2 - k - 2.0 * g.R1 * g.r1 * c) + (
+        g.R1**2 + g.r1**2 - 2.0 * g.R1 * g.r1 * c) * (y * y)
+
+
+def _platform_pose(geom: Geometry, xp: np.ndarray, a: np.ndarray, b: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    c, s = np.cos(alpha), np.sin(alpha)
+    return np.stack([xp, a * c + b * s, geom.da - b * c + a * s], axis=-1)
+
+
+@dataclass(frozen=True)
+class MachineIK:
+    """Working-mode IK for N tool poses; NaN rows where the pose is unreachable."""
+
+    joints: np.ndarray  # (N, 5) rho1..3 mm, theta1, theta2 rad
+    alpha: np.ndarray  # (N,) rad
+    phi: np.ndarray  # (N, 2) rad
+    platform: np.ndarray  # (N, 3) mm, base frame
+    reachable: np.ndarray  # (N,) bool
+
+
+def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray | int = 1,
+                       theta2_at_pole: np.ndarray | float = 0.0) -> MachineIK:
+    """Working-mode joints for tool tips (N, 3) mm and unit axes (N, 3), table frame, one angle pair.
+
+    The working alpha is the root in (-alpha_max, alpha_max) of the signed form of eq. 31,
+    F(alpha) = yP sqrt(R1^2 + r1^2 - 2 R1 r1 cos) + R1 sin sqrt(a^2 - X1^2) (eq. 13 with
+    s1 = -1 and eq. 9), found by Newton's method from its linearisation at alpha = 0. The
+    result is verified (closure equations, s_i = -1); poses where Newton did not land on a
+    working solution go through the all-solutions route.
+    """
+    tip = np.atleast_2d(np.asarray(tip, dtype=float))
+    axis = np.atleast_2d(np.asarray(axis, dtype=float))
+    n = tip.shape[0]
+    pair = np.broadcast_to(np.asarray(pair), (n,))
+    theta2_at_pole = np.broadcast_to(np.asarray(theta2_at_pole, dtype=float), (n,))
+    phi1, phi2 = axis_angles(axis, pair, theta2_at_pole)
+    xp, a, b = _platform_coefficients(geom, tip, axis, phi1, phi2)
+    g = geom
+    x1sq = (xp + g.D1_minus_d1) ** 2
+    k = g.L1**2 - g.R1**2 - g.r1**2
+    two_rr = 2.0 * g.R1 * g.r1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h0 = np.sqrt(k + two_rr - x1sq)
+        alpha = -a * (g.R1 - g.r1) / (b * (g.R1 - g.r1) + g.R1 * h0)
+        for _ in range(6):
+            c, s = np.cos(alpha), np.sin(alpha)
+            y, dy = a * c + b * s, b * c - a * s
+            gq = np.sqrt(g.R1**2 + g.r1**2 - two_rr * c)
+            h = np.sqrt(k + two_rr * c - x1sq)
+            f = y * gq + g.R1 * s * h
+            df = dy * gq + y * (0.5 * two_rr * s / gq) + g.R1 * (c * h - s * 0.5 * two_rr * s / h)
+            alpha = alpha - np.clip(f / df, -0.2, 0.2)
+    platform = _platform_pose(geom, xp, a, b, alpha)
+    rho = _working_sliders(geom, platform, alpha)
+    good = np.all(np.isfinite(rho), axis=-1) & (np.abs(alpha) < g.alpha_max)
+    good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
+    good[good] = _closes(geom, platform[good], alpha[good], rho[good])
+    joints = np.column_stack([rho, alpha - phi1, -phi2])
+    retry = np.flatnonzero(~good & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
+    if retry.size:
+        exact = machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
+        wm = exact.working_mode
+        order = np.lexsort((np.abs(exact.alpha[wm]), exact.pose_index[wm]))
+        found, first = np.unique(exact.pose_index[wm][order], return_index=True)
+        target = retry[found]
+        joints[target] = exact.joints[wm][order][first]
+        alpha[target] = exact.alpha[wm][order][first]
+        good[target] = True
+    joints[~good] = np.nan
+    alpha = np.where(good, alpha, np.nan)
+    platform = _platform_pose(geom, xp, a, b, alpha)
+    return MachineIK(joints, alpha, np.column_stack([phi1, phi2]), platform, good)
+
+
+def _working_sliders(geom: Geometry, platform: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Eq. 10-12 with s_i = -1 (mm); NaN where a radicand is negative."""
+    g = geom
+    x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
+    c, s = np.cos(alpha), np.sin(alpha)
+    x2 = x + g.D2_minus_d2
+    with np.errstate(invalid="ignore"):
+        return np.stack([
+            z - np.sqrt(g.L1**2 - (g.R1**2 + g.r1**2 - 2 * g.R1 * g.r1 * c) - (x + g.D1_minus_d1) ** 2 - y**2),
+            z - g.R2 * s - np.sqrt(g.L2**2 - x2**2 - (y - g.R2 * c + g.r4) ** 2),
+            z + g.R2 * s - np.sqrt(g.L3**2 - x2**2 - (y + g.R2 * c - g.r4) ** 2),
+        ], axis=-1)
+
+
+def _closes(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    from .module import closure_ok
+
+    return closure_ok(geom, platform, alpha, rho)
+
+
+@dataclass(frozen=True)
+class MachineIKSolutions:
+    """All IK solutions of the machine for N poses, flattened by ``pose_index``."""
+
+    pose_index: np.ndarray  # (K,) int
+    joints: np.ndarray  # (K, 5) rho mm, theta rad
+    alpha: np.ndarray  # (K,) rad
+    phi: np.ndarray  # (K, 2) rad
+    pair: np.ndarray  # (K,) +1 / -1
+    working_mode: np.ndarray  # (K,) bool
+
+
+def machine_ik_all(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray | int | None = None,
+                   theta2_at_pole: np.ndarray | float = 0.0) -> MachineIKSolutions:
+    """All IK solutions for tips (N, 3) mm and axes (N, 3), table frame: roots of eq. 31.
+
+    ``pair`` None gives both angle pairs (up to 2 x 16 solutions per pose). Eq. 31 is solved
+    in alpha = theta1 + phi1 as a sextic in tan(alpha/2); each real root gives the platform
+    pose and, through eq. 10-13, up to 4 slider sets (more on the special cases of Table II).
+    """
+    tip = np.atleast_2d(np.asarray(tip, dtype=float))
+    axis = np.atleast_2d(np.asarray(axis, dtype=float))
+    n = tip.shape[0]
+    theta2_at_pole = np.broadcast_to(np.asarray(theta2_at_pole, dtype=float), (n,))
+    pairs = (1, -1) if pair is None else (None,)
+    parts = []
+    for p in pairs:
+        pp = np.broadcast_to(np.asarray(pair if p is None else p), (n,))
+        phi1, phi2 = axis_angles(axis, pp, theta2_at_pole)
+        xp, a, b = _platform_coefficients(geom, tip, axis, phi1, phi2)
+        c, s = TrigPoly.cos_sin(n)
+        poly = _coupling(geom, xp + geom.D1_minus_d1, a, b, c, s)
+        candidates = real_half_angle_roots(poly.num)
+        index = np.repeat(np.arange(n), [len(r) for r in candidates])
+        alpha = np.concatenate(candidates)
+        alpha = _polish(geom, xp[index] + geom.D1_minus_d1, a[index], b[index], alpha)
+        platform = _platform_pose(geom, xp[index], a[index], b[index], alpha)
+        order = np.argsort(index, kind="stable")
+        sol = solutions_for_alpha(geom, platform[order], alpha[order], index[order])
+        k = sol.pose_index
+        joints = np.column_stack([sol.rho, sol.alpha - phi1[k], -phi2[k]])
+        parts.append((k, joints, sol.alpha, np.column_stack([phi1[k], phi2[k]]), pp[k], sol.working_mode))
+    index, joints, alpha, phi, pair_, working = (np.concatenate(x) for x in zip(*parts, strict=False))
+    key = np.column_stack([index, np.round(joints, 6)])
+    _, first = np.unique(key, axis=0, return_index=True)
+    first = np.sort(first)
+    order = first[np.lexsort((joints[first, 0], alpha[first], -pair_[first], index[first]))]
+    return MachineIKSolutions(index[order], joints[order], alpha[order], phi[order], pair_[order], working[order])
+
+
+def _polish(geom: Geometry, x1: np.ndarray, a: np.ndarray, b: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    h = 1e-7
+    for _ in range(3):
+        f = _coupling(geom, x1, a, b, np.cos(alpha), np.sin(alpha))
+        df = (_coupling(geom, x1, a, b, np.cos(alpha + h), np.sin(alpha + h))
+              - _coupling(geom, x1, a, b, np.cos(alpha - h), np.sin(alpha - h))) / (2 * h)
+        alpha = alpha - np.clip(np.divide(f, df, out=np.zeros_like(f), where=df != 0), -1e-3, 1e-3)
+    return alpha
+
+
+def tool_pose(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 32-33: tool tip (N, 3) mm and unit axis (N, 3) in the table frame.
+
+    ``platform`` (N, 3) mm base frame, alpha/theta1/theta2 rad.
+    """
+    g = geom
+    xp, yp, zp = platform[:, 0], platform[:, 1], platform[:, 2]
+    c1, s1 = np.cos(theta1), np.sin(theta1)
+    c2, s2 = np.cos(theta2), np.sin(theta2)
+    phi1 = alpha - theta1
+    lateral = g.delta * np.sin(phi1) - c1 * yp - s1 * (zp - g.da)
+    tip = np.stack([
+        c2 * xp + s2 * lateral,
+        -s2 * xp + c2 * lateral,
+        s1 * yp - c1 * zp + g.da * c1 - g.delta * np.cos(phi1) + g.dt,
+    ], axis=-1)
+    return tip, axis_from_angles(phi1, -theta2)
+
+
+@dataclass(frozen=True)
+class MachineFK:
+    """Working-mode FK for N joint sets; NaN where no working assembly exists."""
+
+    tip: np.ndarray  # (N, 3) mm, table frame
+    axis: np.ndarray  # (N, 3) unit, table frame
+    platform: np.ndarray  # (N, 3) mm, base frame
+    alpha: np.ndarray  # (N,) rad
+    reachable: np.ndarray  # (N,) bool
+
+
+def machine_fk_working(geom: Geometry, joints: np.ndarray) -> MachineFK:
+    """Tool tip (mm) and axis in the table frame for joints (N, 5): rho mm, theta rad."""
+    joints = np.atleast_2d(np.asarray(joints, dtype=float))
+    module = module_fk_working(geom, joints[:, :3])
+    tip, axis = tool_pose(geom, module.platform, module.alpha, joints[:, 3], joints[:, 4])
+    return MachineFK(tip, axis, module.platform, module.alpha, module.reachable)
+
+
+@dataclass(frozen=True)
+class MachineFKSolutions:
+    """Every assembly mode for N joint sets, flattened by ``pose_index``."""
+
+    pose_index: np.ndarray
+    tip: np.ndarray  # (K, 3) mm, table frame
+    axis: np.ndarray  # (K, 3)
+    phi: np.ndarray  # (K, 2) rad
+    platform: np.ndarray  # (K, 3) mm, base frame
+    alpha: np.ndarray  # (K,) rad
+    working_mode: np.ndarray  # (K,) bool
+
+
+def machine_fk_all(geom: Geometry, joints: np.ndarray) -> MachineFKSolutions:
+    """All assembly modes (eq. 32-33 over the module's FK solutions) for joints (N, 5)."""
+    joints = np.atleast_2d(np.asarray(joints, dtype=float))
+    module = module_fk_all(geom, joints[:, :3])
+    j = joints[module.pose_index]
+    tip, axis = tool_pose(geom, module.platform, module.alpha, j[:, 3], j[:, 4])
+    phi = np.column_stack([wrap_angle(module.alpha - j[:, 3]), wrap_angle(-j[:, 4])])
+    return MachineFKSolutions(module.pose_index, tip, axis, phi, module.platform, module.alpha, module.working_mode)

@@ -1,0 +1,135 @@
+"""Analytic Jacobians and singularity measures of the VERNE.
+
+Units: rho mm, theta and alpha rad; tip velocities in mm per unit joint rate, table frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..machine import Geometry
+
+
+def _rod_vectors(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rod vectors B - A (N, 4, 3) mm (rods 1a, 1b, leg II, leg III), dB/dalpha (N, 4, 3), lengths (4,)."""
+    g = geom
+    c, s = np.cos(alpha), np.sin(alpha)
+    x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
+    # Platform point offsets (R_pl) rotated by alpha about x: (0, Y, 0) -> (0, Y c, Y s).
+    offsets = np.array([g.R1, -g.R1, -g.R2, g.R2])
+    sliders_y = np.array([g.r1, -g.r1, -g.r4, g.r4])
+    dx = np.array([g.D1_minus_d1, g.D1_minus_d1, g.D2_minus_d2, g.D2_minus_d2])
+    slider_z = rho[:, [0, 0, 1, 2]]
+    rods = np.stack([
+        x[:, None] + dx,
+        y[:, None] + offsets * c[:, None] - sliders_y,
+        z[:, None] + offsets * s[:, None] - slider_z,
+    ], axis=-1)
+    d_alpha = np.stack([np.zeros((len(c), 4)), -offsets * s[:, None], offsets * c[:, None]], axis=-1)
+    return rods, d_alpha, np.array([g.L1, g.L1, g.L2, g.L3])
+
+
+def module_jacobian(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """d(xP, yP, zP, alpha)/d(rho1, rho2, rho3), (N, 4, 3), from the closure equations.
+
+    Differentiating eq. 3a, 3b, 4, 5: A d(pose) + B d(rho) = 0, so d(pose) = -A^-1 B d(rho).
+    """
+    rods, d_alpha, _ = _rod_vectors(geom, platform, alpha, rho)
+    a = np.concatenate([rods, np.sum(rods * d_alpha, axis=-1, keepdims=True)], axis=-1)
+    b = np.zeros((*rods.shape[:2], 3))
+    b[:, 0, 0], b[:, 1, 0], b[:, 2, 1], b[:, 3, 2] = (-rods[:, k, 2] for k in range(4))
+    return -np.linalg.solve(a, b)
+
+
+def singularity_measures(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """(serial, parallel) margins in [0, 1] for N module poses; 0 is singular.
+
+    serial: min over the four rod equations of |cos| of the angle between the rod and its
+    vertical guideway (a rod perpendicular to its guideway: the slider no longer moves the
+    platform along the rod). parallel: inverse condition number of the direct-kinematics
+    matrix A with rows normalised by rod length and the alpha column by R1.
+    """
+    rods, d_alpha, lengths = _rod_vectors(geom, platform, alpha, rho)
+    units = rods / lengths[:, None]
+    serial = np.min(np.abs(units[..., 2]), axis=-1)
+    a = np.concatenate([units, np.sum(units * d_alpha, axis=-1, keepdims=True) / geom.R1], axis=-1)
+    sv = np.linalg.svd(a, compute_uv=False)
+    parallel = sv[:, -1] / sv[:, 0]
+    return serial, parallel
+
+
+def machine_jacobian(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """(N, 6, 5): rows d(tip)/dq (mm per mm or per rad) and d(axis)/dq, table frame.
+
+    q = (rho1, rho2, rho3, theta1, theta2); platform (N, 3) mm and alpha rad of the
+    assembly mode (from the FK).
+    """
+    g = geom
+    xp, yp, zp = platform[:, 0], platform[:, 1], platform[:, 2]
+    t1, t2 = joints[:, 3], joints[:, 4]
+    c1, s1, c2, s2 = np.cos(t1), np.sin(t1), np.cos(t2), np.sin(t2)
+    phi1, phi2 = alpha - t1, -t2
+    cp, sp = np.cos(phi1), np.sin(phi1)
+    lateral = g.delta * sp - c1 * yp - s1 * (zp - g.da)
+    n = len(t1)
+    # d(lateral, tip_z)/d(xp, yp, zp, alpha, theta1)
+    d_lat = np.stack([np.zeros(n), -c1, -s1, g.delta * cp, -g.delta * cp + s1 * yp - c1 * (zp - g.da)], -1)
+    d_z = np.stack([np.zeros(n), s1, -c1, g.delta * sp, c1 * yp + s1 * zp - g.da * s1 - g.delta * sp], -1)
+    d_xp = np.zeros((n, 5))
+    d_xp[:, 0] = 1.0
+    tip_x, tip_y = c2 * xp + s2 * lateral, -s2 * xp + c2 * lateral
+    d_tip = np.stack([c2[:, None] * d_xp + s2[:, None] * d_lat, -s2[:, None] * d_xp + c2[:, None] * d_lat, d_z], 1)
+    d_axis_phi1 = np.stack([cp * np.sin(phi2), -cp * np.cos(phi2), -sp], -1)
+    d_axis_phi2 = np.stack([sp * np.cos(phi2), sp * np.sin(phi2), np.zeros(n)], -1)
+    d_axis = np.zeros((n, 3, 5))
+    d_axis[:, :, 3], d_axis[:, :, 4] = d_axis_phi1, -d_axis_phi1  # d phi1/d alpha = 1, /d theta1 = -1
+    # Columns: (xp, yp, zp, alpha, theta1) -> chain through the module for rho.
+    d_pose = module_jacobian(g, platform, alpha, joints[:, :3])
+    explicit = np.concatenate([d_tip, d_axis], axis=1)  # (N, 6, 5) w.r.t. (xp, yp, zp, alpha, theta1)
+    jac = np.zeros((n, 6, 5))
+    jac[:, :, :3] = explicit[:, :, :4] @ d_pose
+    jac[:, :, 3] = explicit[:, :, 4]
+    jac[:, 0, 4], jac[:, 1, 4] = tip_y, -tip_x
+    jac[:, 3:, 4] = -d_axis_phi2
+    return jac
+
+
+
+
+def joint_rates(jacobian: np.ndarray, tip_velocity: np.ndarray, axis_rate: np.ndarray) -> np.ndarray:
+    """Joint rates (N, 5) (mm/s, rad/s) giving tip velocity (N, 3) mm/s and axis rate (N, 3) 1/s.
+
+    The axis rate must be perpendicular to the axis (2 DOF); the 6 x 5 system is solved in
+    the least-squares sense, exact when consistent.
+    """
+    rhs = np.concatenate([tip_velocity, axis_rate], axis=-1)[..., None]
+    return (np.linalg.pinv(jacobian) @ rhs)[..., 0]
+
+
+@dataclass(frozen=True)
+class Margins:
+    """Distances to the machine's singular and colliding configurations, per pose (N,)."""
+
+    serial: np.ndarray  # [0, 1]: |cos| rod / guideway, worst rod
+    parallel: np.ndarray  # [0, 1]: inverse condition number of the module's direct kinematics
+    machine: np.ndarray  # [0, 1]: inverse condition number of the whole tool Jacobian
+    rod_clearance: np.ndarray  # mm: R1 cos(alpha) - r1, leg I rods cross at 0
+
+
+def margins(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray) -> Margins:
+    """All margins for N working-mode poses: joints (N, 5) mm/rad, platform (N, 3) mm, alpha rad.
+
+    machine: the 6 x 5 Jacobian of (tip, axis) with the axis rows times Delta and the theta
+    columns divided by Delta (all entries in mm per mm); where two working solutions of one
+    tool pose merge (a fold of the coupled tilt), it loses rank.
+    """
+    serial, parallel = singularity_measures(geom, platform, alpha, joints[:, :3])
+    jac = machine_jacobian(geom, joints, platform, alpha)
+    jac[:, 3:, :] *= geom.delta
+    jac[:, :, 3:] /= geom.delta
+    sv = np.linalg.svd(jac, compute_uv=False)
+    return Margins(serial, parallel, sv[:, -1] / sv[:, 0], geom.R1 * np.cos(alpha) - geom.r1)

@@ -1,0 +1,100 @@
+"""Batched trigonometric polynomials in tan-half-angle form, for the exact eliminations.
+
+A polynomial in (cos a, sin a) of degree k equals num(t) / (1 + t^2)^k with t = tan(a/2),
+cos a = (1 - t^2) / (1 + t^2), sin a = 2t / (1 + t^2). The closure formulas are written once
+as ordinary arithmetic on ``c`` and ``s``; called with arrays they evaluate, called with
+:class:`TrigPoly` they build the numerator polynomial whose real roots are the solutions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+_ONE_PLUS_T2 = np.array([1.0, 0.0, 1.0])
+
+
+def _convolve_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    out = np.zeros((a.shape[0], a.shape[1] + b.shape[1] - 1))
+    for i in range(a.shape[1]):
+        out[:, i : i + b.shape[1]] += a[:, i : i + 1] * b
+    return out
+
+
+class TrigPoly:
+    """``num`` (N, 2k+1): ascending coefficients in t of N numerators; ``degree`` k."""
+
+    __array_priority__ = 1000  # ndarray * TrigPoly must defer to TrigPoly.__rmul__
+
+    def __init__(self, num: np.ndarray, degree: int) -> None:
+        self.num = num
+        self.degree = degree
+
+    @classmethod
+    def cos_sin(cls, n: int) -> tuple[TrigPoly, TrigPoly]:
+        ones = np.ones((n, 1))
+        return cls(ones * [1.0, 0.0, -1.0], 1), cls(ones * [0.0, 2.0, 0.0], 1)
+
+    def _lift(self, degree: int) -> np.ndarray:
+        num = self.num
+        for _ in range(degree - self.degree):
+            num = _convolve_rows(num, _ONE_PLUS_T2[None, :])
+        return num
+
+    @staticmethod
+    def _coerce(other: object, n: int) -> TrigPoly:
+        if isinstance(other, TrigPoly):
+            return other
+        value = np.broadcast_to(np.asarray(other, dtype=float), (n,))
+        return TrigPoly(value[:, None].copy(), 0)
+
+    def __add__(self, other: object) -> TrigPoly:
+        other = self._coerce(other, self.num.shape[0])
+        degree = max(self.degree, other.degree)
+        return TrigPoly(self._lift(degree) + other._lift(degree), degree)
+
+    __radd__ = __add__
+
+    def __neg__(self) -> TrigPoly:
+        return TrigPoly(-self.num, self.degree)
+
+    def __sub__(self, other: object) -> TrigPoly:
+        return self + (-self._coerce(other, self.num.shape[0]))
+
+    def __rsub__(self, other: object) -> TrigPoly:
+        return (-self) + other
+
+    def __mul__(self, other: object) -> TrigPoly:
+        if isinstance(other, TrigPoly):
+            return TrigPoly(_convolve_rows(self.num, other.num), self.degree + other.degree)
+        value = np.asarray(other, dtype=float)
+        return TrigPoly(self.num * (value[:, None] if value.ndim else value), self.degree)
+
+    __rmul__ = __mul__
+
+    def __pow__(self, exponent: int) -> TrigPoly:
+        result = self
+        for _ in range(exponent - 1):
+            result = result * self
+        return result
+
+
+def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> list[np.ndarray]:
+    """Angles (rad, in (-pi, pi]) of the real roots of each row's numerator, plus pi itself.
+
+    pi (t = infinity) is always returned as a candidate because a vanishing leading
+    coefficient hides it; callers verify every candidate against the closure equations.
+    """
+    result = []
+    for row in num:
+        coefficients = row[::-1]
+        scale = np.max(np.abs(coefficients))
+        if scale == 0.0 or not np.isfinite(scale):
+            result.append(np.array([np.pi]))
+            continue
+        coefficients = coefficients / scale
+        nonzero = np.flatnonzero(np.abs(coefficients) > 1e-13)
+        coefficients = coefficients[nonzero[0] :]
+        roots = np.roots(coefficients) if coefficients.size > 1 else np.empty(0)
+        real = roots[np.abs(roots.imag) <= imag_tol * (1.0 + np.abs(roots))].real
+        result.append(np.append(2.0 * np.arctan(real), np.pi))
+    return result

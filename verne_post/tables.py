@@ -1,0 +1,70 @@
+"""Numeric CSV tables with a header: read with file/line errors, write atomically."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_write
+from .errors import InputError
+
+
+def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: Sequence[str] = ()
+               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Columns (name -> float array) and the 1-based file line of each row.
+
+    The header must name every ``required`` column and nothing outside ``required`` and
+    ``optional`` (any order, case and surrounding spaces ignored). Every cell must be a finite
+    number. Blank lines are skipped.
+    """
+    source = str(path)
+    try:
+        with open(path, encoding="utf-8", newline="") as handle:
+            rows = list(csv.reader(handle))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read: {exc}", source) from None
+    numbered = [(k + 1, row) for k, row in enumerate(rows) if any(cell.strip() for cell in row)]
+    if not numbered:
+        raise InputError("empty file: expected a header line " + ",".join(required), source)
+    header_line, header = numbered[0]
+    names = [cell.strip().lower() for cell in header]
+    missing = [c for c in required if c not in names]
+    unknown = [c for c in names if c not in required and c not in optional]
+    if missing or unknown or len(set(names)) != len(names):
+        expected = ",".join(required) + "".join(f"[,{c}]" for c in optional)
+        raise InputError(f"header must be {expected}, got {','.join(names)}", source, header_line)
+    values = np.empty((len(numbered) - 1, len(names)))
+    lines = np.empty(len(numbered) - 1, dtype=np.int64)
+    for r, (line, row) in enumerate(numbered[1:]):
+        if len(row) != len(names):
+            raise InputError(f"expected {len(names)} values, got {len(row)}", source, line)
+        for c, cell in enumerate(row):
+            try:
+                value = float(cell)
+            except ValueError:
+                raise InputError(f"'{cell.strip()}' is not a number (column {names[c]})", source, line) from None
+            if not math.isfinite(value):
+                raise InputError(f"'{cell.strip()}' is not a finite number (column {names[c]})", source, line)
+            values[r, c] = value
+        lines[r] = line
+    return {name: values[:, c] for c, name in enumerate(names)}, lines
+
+
+def write_table(path: str | os.PathLike[str], columns: dict[str, np.ndarray], formats: dict[str, str]) -> None:
+    """Write columns as CSV with a header, atomically; ``formats`` maps a column to e.g. '%.6f'."""
+    names = list(columns)
+    with atomic_write(Path(path), newline="") as handle:
+        handle.write(",".join(names) + "\n")
+        n = len(next(iter(columns.values()))) if columns else 0
+        if n == 0:
+            return
+        text = [np.char.mod(formats.get(name, "%.9g"), np.asarray(columns[name])) for name in names]
+        rows = text[0]
+        for column in text[1:]:
+            rows = np.char.add(np.char.add(rows, ","), column)
+        handle.write("\n".join(rows.tolist()) + "\n")
