@@ -116,20 +116,26 @@ class Margins:
 
     serial: np.ndarray  # [0, 1]: |cos| rod / guideway, worst rod
     parallel: np.ndarray  # [0, 1]: inverse condition number of the module's direct kinematics
-    machine: np.ndarray  # [0, 1]: inverse condition number of the whole tool Jacobian
+    machine: np.ndarray  # [0, 1]: inverse condition number of the tool Jacobian at fixed theta2
     rod_clearance: np.ndarray  # mm: R1 cos(alpha) - r1, leg I rods cross at 0
 
 
 def margins(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray) -> Margins:
     """All margins for N working-mode poses: joints (N, 5) mm/rad, platform (N, 3) mm, alpha rad.
 
-    machine: the 6 x 5 Jacobian of (tip, axis) with the axis rows times Delta and the theta
-    columns divided by Delta (all entries in mm per mm); where two working solutions of one
-    tool pose merge (a fold of the coupled tilt), it loses rank.
+    machine: the Jacobian of (tip, phi1) with respect to (rho1, rho2, rho3, theta1) at fixed
+    theta2, phi1 times Delta and theta1 divided by Delta (all entries mm per mm). It loses rank
+    where two working solutions of one tool pose merge (a fold of the coupled tilt). theta2 is
+    left out on purpose: the rotary table's pole (axis along the table normal) is a singularity
+    of its own, handled by the postprocessor's pole logic.
     """
     serial, parallel = singularity_measures(geom, platform, alpha, joints[:, :3])
-    jac = machine_jacobian(geom, joints, platform, alpha)
-    jac[:, 3:, :] *= geom.delta
-    jac[:, :, 3:] /= geom.delta
+    full = machine_jacobian(geom, joints, platform, alpha)
+    d_alpha = module_jacobian(geom, platform, alpha, joints[:, :3])[:, 3, :]
+    jac = np.zeros((len(alpha), 4, 4))
+    jac[:, :3, :] = full[:, :3, :4]
+    jac[:, :3, 3] /= geom.delta
+    jac[:, 3, :3] = geom.delta * d_alpha
+    jac[:, 3, 3] = -1.0
     sv = np.linalg.svd(jac, compute_uv=False)
     return Margins(serial, parallel, sv[:, -1] / sv[:, 0], geom.R1 * np.cos(alpha) - geom.r1)
