@@ -93,15 +93,19 @@ class IKResult:
 
 
 def pose_margins(machine: Machine, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray,
-                 reachable: np.ndarray, tool_length: float = 0.0) -> Margins:
-    """Margins of N poses (NaN where not reachable); joints mm/rad, platform mm, alpha rad."""
+                 reachable: np.ndarray, tool_length: float | np.ndarray = 0.0) -> Margins:
+    """Margins of N poses (NaN where not reachable); joints mm/rad, platform mm, alpha rad.
+
+    ``tool_length`` (mm) is one value or one per pose.
+    """
     n = len(alpha)
+    lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
     out = [np.full(n, np.nan) for _ in Margins.__dataclass_fields__]
-    if reachable.any():
-        found = margins(machine.kinematic_geometry(tool_length), joints[reachable], platform[reachable],
-                        alpha[reachable])
-        for array, name in zip(out, Margins.__dataclass_fields__, strict=False):
-            array[reachable] = getattr(found, name)
+    for length in np.unique(lengths[reachable]):
+        rows = reachable & (lengths == length)
+        found = margins(machine.kinematic_geometry(float(length)), joints[rows], platform[rows], alpha[rows])
+        for array, name in zip(out, Margins.__dataclass_fields__, strict=True):
+            array[rows] = getattr(found, name)
     return Margins(*out)
 
 
@@ -122,6 +126,11 @@ def _fieldwise(function: Callable[..., np.ndarray], *results: IKResult) -> IKRes
     fields = {f: function(*(getattr(r, f) for r in results)) for f in IKResult.__dataclass_fields__ if f != "margins"}
     found = Margins(*(function(*(getattr(r.margins, f) for r in results)) for f in Margins.__dataclass_fields__))
     return IKResult(**fields, margins=found)
+
+
+def concatenate(results: list[IKResult]) -> IKResult:
+    """The rows of several results one after the other."""
+    return _fieldwise(lambda *arrays: np.concatenate(arrays), *results)
 
 
 def _status(machine: Machine, ik: MachineIK, pair: int, tool_length: float) -> IKResult:
@@ -196,11 +205,22 @@ class FKResult:
     reachable: np.ndarray  # (N,) bool
 
 
-def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: float = 0.0) -> FKResult:
-    """Tool tip (mm) and axis in the table frame, machine's assembly mode, for joints (N, 5) mm/rad."""
+def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: float | np.ndarray = 0.0) -> FKResult:
+    """Tool tip (mm) and axis in the table frame, machine's assembly mode, for joints (N, 5) mm/rad.
+
+    ``tool_length`` (mm) is one value or one per joint set.
+    """
     joints = np.atleast_2d(np.asarray(joints, dtype=float))
-    fk = machine_fk_working(machine.kinematic_geometry(tool_length), joints)
-    return FKResult(fk.tip, fk.axis, fk.alpha, fk.platform, fk.reachable)
+    lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (len(joints),))
+    out = FKResult(np.empty((len(joints), 3)), np.empty((len(joints), 3)), np.empty(len(joints)),
+                   np.empty((len(joints), 3)), np.empty(len(joints), bool))
+    for length in np.unique(lengths):
+        rows = lengths == length
+        fk = machine_fk_working(machine.kinematic_geometry(float(length)), joints[rows])
+        for name, value in (("tip", fk.tip), ("axis", fk.axis), ("alpha", fk.alpha), ("platform", fk.platform),
+                            ("reachable", fk.reachable)):
+            getattr(out, name)[rows] = value
+    return out
 
 
 def forward_kinematics_all(machine: Machine, joints: np.ndarray, *, tool_length: float = 0.0) -> MachineFKSolutions:

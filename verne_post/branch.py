@@ -1,102 +1,203 @@
-"""Angle-pair (branch) choice and rotary-axis continuity along a toolpath.
+"""IK along a toolpath: angle-pair (branch) choice, rotary continuity and the table's pole.
 
 Every tool axis has two working-mode solutions, one per angle pair (theta1 ~ -phi1 with
 theta2 = -phi2, or theta1 ~ +phi1 with theta2 turned by pi). Switching pair in the middle of
-a cut would swing the table by 180 degrees, so one pair is kept along each sequence (a run
-of poses the caller says must be continuous, e.g. a feed sequence between rapids).
-Angles in radians, tips in mm, table frame.
+a cut would swing the table by 180 degrees, so one pair is kept along each *run* of a
+sequence (a sequence is a stretch the caller says must be continuous, e.g. a feed sequence
+between rapids). Near the pole (axis within ``cone`` of the table normal) theta2 is
+ill-defined: there it is interpolated between the neighbouring well-defined values and the
+axis is met as closely as that theta2 allows (error <= the cone angle); crossing the pole
+the path continues on the other pair, which is the continuous motion (theta1 passes through
+0 instead of the table whipping round). Angles in radians, tips in mm, table frame.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from .api import IKResult, Status, inverse_kinematics_pairs
-from .kinematics.full import POLE_EPS
+from .api import IKResult, Status, inverse_kinematics_pairs, joint_bounds
+from .kinematics import axis_from_angles, wrap_angle
 from .machine import Machine
 
 
-def _usable(result: IKResult) -> np.ndarray:
-    return result.status == Status.OK
+@dataclass(frozen=True)
+class PathIK:
+    """Joints along a path plus what the branch stage decided."""
+
+    result: IKResult  # joints (theta2 unwrapped and continuous), status, margins per pose
+    axis: np.ndarray  # (N, 3) axis the joints realise (differs from the programmed one in the pole cone)
+    in_cone: np.ndarray  # (N,) bool: theta2 was interpolated (axis within the pole cone)
+    pair_switch: np.ndarray  # (N,) bool: the pair changed into this pose inside a sequence off the pole
 
 
-def _travel(result: IKResult, rows: np.ndarray) -> tuple[float, float]:
-    """Rotary travel (rad) along the rows, then mean |theta1| to break ties."""
-    joints = result.joints[rows]
-    theta2 = np.unwrap(joints[:, 4])
-    travel = float(np.sum(np.abs(np.diff(joints[:, 3]))) + np.sum(np.abs(np.diff(theta2))))
-    return round(travel, 9), float(np.mean(np.abs(joints[:, 3])))
+def _pole_angle(axis: np.ndarray) -> np.ndarray:
+    """Angle (rad) between unit axes (N, 3) and the table normal."""
+    return np.arctan2(np.hypot(axis[:, 0], axis[:, 1]), axis[:, 2])
 
 
-def choose_pairs(plus: IKResult, minus: IKResult, sequence: np.ndarray) -> np.ndarray:
-    """True where pair +1 is used. One pair per sequence where possible.
-
-    Per sequence: of the pairs usable (status ok) at every pose, the one with the least
-    rotary travel; if neither is usable throughout, each pose takes the pair it can use,
-    poses that could use both keep the pair of the nearest constrained pose before them.
-    """
-    use_plus = np.ones(len(sequence), bool)
-    ok_plus, ok_minus = _usable(plus), _usable(minus)
-    starts = np.flatnonzero(np.r_[True, sequence[1:] != sequence[:-1]])
-    ends = np.r_[starts[1:], len(sequence)]
-    for start, end in zip(starts, ends, strict=False):
-        rows = np.arange(start, end)
-        all_plus, all_minus = ok_plus[rows].all(), ok_minus[rows].all()
-        if all_plus and all_minus:
-            use_plus[rows] = _travel(plus, rows) <= _travel(minus, rows)
-        elif all_plus or all_minus:
-            use_plus[rows] = all_plus
-        else:
-            forced = ok_plus[rows] != ok_minus[rows]
-            choice = np.where(forced, ok_plus[rows], True)
-            if forced.any():
-                last = np.maximum.accumulate(np.where(forced, np.arange(len(rows)), -1))
-                first_forced = np.flatnonzero(forced)[0]
-                last[last < 0] = first_forced
-                choice = choice[last]
-            use_plus[rows] = choice
-    return use_plus
-
-
-def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np.ndarray | None = None,
-               *, tool_length: float | np.ndarray = 0.0) -> IKResult:
-    """Working-mode joints along a path of N poses (tip mm, unit axis, table frame).
-
-    Keeps one angle pair per ``sequence`` id (default: one sequence), holds theta2 across
-    poses whose axis is exactly the table normal (theta2 free there), and unwraps theta2 so
-    it never jumps by a turn. ``tool_length`` (mm) may vary per pose (tool changes).
-    """
-    n = len(tip)
-    sequence = np.zeros(n, int) if sequence is None else np.asarray(sequence)
-    lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
-    plus, minus = _pairs_by_tool(machine, tip, axis, lengths, np.zeros(n))
-    chosen = plus.take(choose_pairs(plus, minus, sequence), minus)
-    pole = np.hypot(axis[:, 0], axis[:, 1]) <= POLE_EPS * np.linalg.norm(axis, axis=-1)
-    defined = np.flatnonzero(~pole & np.isfinite(chosen.joints[:, 4]))
-    theta2 = np.zeros(n)
-    if defined.size:
-        # Unwrap over the poses where theta2 is defined; hold it across the others.
-        theta2[defined] = np.unwrap(chosen.joints[defined, 4])
-        source = np.maximum.accumulate(np.where(np.isin(np.arange(n), defined), np.arange(n), -1))
-        source[source < 0] = defined[0]
-        theta2 = theta2[source]
-    if pole.any():
-        rows = np.flatnonzero(pole)
-        p, m = _pairs_by_tool(machine, tip[rows], axis[rows], lengths[rows], theta2[rows])
-        chosen = chosen.scatter(rows, p.take(chosen.pair[rows] > 0, m))
-    joints = chosen.joints.copy()
-    joints[:, 4] = np.where(np.isfinite(joints[:, 4]), theta2, np.nan)
-    return chosen.with_joints(joints)
-
-
-def _pairs_by_tool(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray,
-                   theta2_at_pole: np.ndarray) -> tuple[IKResult, IKResult]:
+def _pairs(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray,
+           theta2_at_pole: np.ndarray) -> tuple[IKResult, IKResult]:
+    """Working-mode solutions of both pairs, grouped by tool length (mm)."""
     plus = minus = None
     for length in np.unique(lengths):
         rows = np.flatnonzero(lengths == length)
         p, m = inverse_kinematics_pairs(machine, tip[rows], axis[rows], tool_length=float(length),
                                         theta2_at_pole=theta2_at_pole[rows])
-        if plus is None:  # first tool: allocate full-length results, then fill per tool
+        if plus is None:  # first group: allocate full-length results, then fill group by group
             plus, minus = (r.rows(np.zeros(len(tip), int)) for r in (p, m))
         plus, minus = plus.scatter(rows, p), minus.scatter(rows, m)
+    assert plus is not None and minus is not None
     return plus, minus
+
+
+def solve_with_theta2(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray,
+                      theta2: np.ndarray, cone: float) -> tuple[IKResult, np.ndarray]:
+    """Working-mode joints with theta2 near a reference (rad); returns (result, realised axis).
+
+    Off the pole cone the angle pair whose theta2 is nearest ``theta2`` (mod 2 pi) is used and
+    theta2 is unwrapped next to it. Inside the cone theta2 is imposed and the axis becomes its
+    projection on the plane that theta2 allows (phi1 signed).
+    """
+    axis = axis.copy()
+    in_cone = _pole_angle(axis) < cone
+    phi2 = -theta2[in_cone]
+    along = np.stack([np.sin(phi2), -np.cos(phi2)], axis=-1)
+    phi1 = np.arctan2(np.sum(axis[in_cone, :2] * along, axis=-1), axis[in_cone, 2])
+    axis[in_cone] = axis_from_angles(phi1, phi2)
+    plus, minus = _pairs(machine, tip, axis, lengths, theta2)
+    # Inside the cone, pair +1 stands for phi1 >= 0 and pair -1 for phi1 < 0 of the imposed phi2.
+    use_plus = np.abs(wrap_angle(plus.joints[:, 4] - theta2)) <= np.abs(wrap_angle(minus.joints[:, 4] - theta2))
+    use_plus[in_cone] = phi1 >= 0
+    chosen = plus.take(use_plus, minus)
+    joints = chosen.joints.copy()
+    joints[:, 4] = theta2 + wrap_angle(joints[:, 4] - theta2)
+    return chosen.with_joints(joints), axis
+
+
+def _travel(result: IKResult, rows: np.ndarray, previous: np.ndarray | None) -> tuple[float, float]:
+    """Rotary travel (rad) along the rows, from the previous pose's (theta1, theta2) if given,
+    then mean |theta1| to break ties."""
+    joints = result.joints[rows]
+    travel = float(np.sum(np.abs(np.diff(joints[:, 3]))) + np.sum(np.abs(np.diff(np.unwrap(joints[:, 4])))))
+    if previous is not None:
+        travel += abs(joints[0, 3] - previous[0]) + abs(float(wrap_angle(joints[0, 4] - previous[1])))
+    return round(travel, 9), float(np.mean(np.abs(joints[:, 3])))
+
+
+def _run_choice(plus: IKResult, minus: IKResult, rows: np.ndarray, previous: np.ndarray | None, fresh: bool
+                ) -> np.ndarray:
+    """Pair per pose of one run: one pair usable throughout if any.
+
+    A run that starts a sequence takes the pair with the least rotary travel (counting the
+    way from the previous pose); a run that continues a sequence across the pole takes the
+    pair that continues theta2.
+    """
+    ok_plus, ok_minus = plus.status[rows] == Status.OK, minus.status[rows] == Status.OK
+    if ok_plus.all() and ok_minus.all():
+        if fresh or previous is None:
+            choice = _travel(plus, rows, previous) <= _travel(minus, rows, previous)
+        else:
+            choice = (abs(wrap_angle(plus.joints[rows[0], 4] - previous[1]))
+                      <= abs(wrap_angle(minus.joints[rows[0], 4] - previous[1])))
+        return np.full(len(rows), choice)
+    if ok_plus.all() or ok_minus.all():
+        return np.full(len(rows), bool(ok_plus.all()))
+    # Neither pair works throughout: each pose takes the pair it can use; poses that could use
+    # both keep the pair of the nearest constrained pose before them.
+    forced = ok_plus != ok_minus
+    choice = np.where(forced, ok_plus, True)
+    if forced.any():
+        last = np.maximum.accumulate(np.where(forced, np.arange(len(rows)), -1))
+        last[last < 0] = np.flatnonzero(forced)[0]
+        choice = choice[last]
+    return choice
+
+
+def _runs(sequence: np.ndarray, in_cone: np.ndarray) -> list[tuple[np.ndarray, bool]]:
+    """(rows, starts a sequence) for each run of off-cone poses."""
+    boundary = np.r_[True, (sequence[1:] != sequence[:-1]) | (in_cone[1:] != in_cone[:-1])]
+    starts = np.flatnonzero(boundary)
+    ends = np.r_[starts[1:], len(sequence)]
+    new_sequence = np.r_[True, sequence[1:] != sequence[:-1]]
+    runs, fresh = [], False
+    for start, end in zip(starts, ends, strict=True):
+        fresh = fresh or bool(new_sequence[start])
+        if not in_cone[start]:
+            runs.append((np.arange(start, end), fresh))
+            fresh = False
+    return runs
+
+
+def _fit_rotary(machine: Machine, theta2: np.ndarray, sequence: np.ndarray) -> np.ndarray:
+    """Shift each sequence by whole turns into a limited rotary's range where that fits."""
+    lower, upper = joint_bounds(machine)
+    if not np.isfinite(lower[4]):
+        return theta2
+    out = theta2.copy()
+    for seq in np.unique(sequence):
+        rows = sequence == seq
+        low, high = out[rows].min(), out[rows].max()
+        turns = np.arange(np.ceil((lower[4] - low) / (2 * np.pi)), np.floor((upper[4] - high) / (2 * np.pi)) + 1)
+        if turns.size:
+            out[rows] += 2 * np.pi * turns[np.argmin(np.abs(turns))]
+    return out
+
+
+def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np.ndarray | None = None, *,
+               tool_length: float | np.ndarray = 0.0, cone: float = 0.0) -> PathIK:
+    """Working-mode joints along N poses (tip mm, unit axis, table frame), continuous in theta.
+
+    ``sequence`` ids mark stretches that must be continuous (default: one); ``tool_length``
+    (mm) may vary per pose; ``cone`` (rad) is the pole cone. theta2 is unwrapped along the
+    whole path (shortest way across rapids) and fitted into a limited rotary's range.
+    """
+    n = len(tip)
+    sequence = np.zeros(n, int) if sequence is None else np.asarray(sequence)
+    lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
+    in_cone = _pole_angle(axis) < max(cone, 1e-12)
+    plus, minus = _pairs(machine, tip, axis, lengths, np.zeros(n))
+    use_plus = np.ones(n, bool)
+    previous: np.ndarray | None = None
+    for rows, fresh in _runs(sequence, in_cone):
+        use_plus[rows] = _run_choice(plus, minus, rows, previous, fresh)
+        previous = (plus if use_plus[rows[-1]] else minus).joints[rows[-1], 3:]
+    chosen = plus.take(use_plus, minus)
+    defined = np.flatnonzero(~in_cone & np.isfinite(chosen.joints[:, 4]))
+    theta2 = np.zeros(n)
+    if defined.size:
+        theta2[defined] = np.unwrap(chosen.joints[defined, 4])
+        theta2 = _interpolate_cone(theta2, defined, tip, sequence)
+    theta2 = _fit_rotary(machine, theta2, sequence)
+    result = chosen.with_joints(np.column_stack([chosen.joints[:, :4], theta2]))
+    realised = axis.copy()
+    if in_cone.any():
+        rows = np.flatnonzero(in_cone)
+        redo, realised[rows] = solve_with_theta2(machine, tip[rows], axis[rows], lengths[rows], theta2[rows], cone)
+        result = result.scatter(rows, redo)
+    switch = np.r_[False, (use_plus[1:] != use_plus[:-1]) & (sequence[1:] == sequence[:-1])
+                   & ~in_cone[1:] & ~in_cone[:-1]]
+    return PathIK(result, realised, in_cone, switch)
+
+
+def _interpolate_cone(theta2: np.ndarray, defined: np.ndarray, tip: np.ndarray, sequence: np.ndarray) -> np.ndarray:
+    """theta2 at the undefined poses: linear in tip distance between the defined neighbours of
+    the same sequence, else held from the nearest defined pose."""
+    n = len(theta2)
+    distance = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(tip, axis=0), axis=1))]
+    before = np.maximum.accumulate(np.where(np.isin(np.arange(n), defined), np.arange(n), -1))
+    after = np.minimum.accumulate(np.where(np.isin(np.arange(n), defined), np.arange(n), n)[::-1])[::-1]
+    out = theta2.copy()
+    for k in np.flatnonzero(~np.isin(np.arange(n), defined)):
+        b, a = before[k], after[k]
+        b_ok = b >= 0 and sequence[b] == sequence[k]
+        a_ok = a < n and sequence[a] == sequence[k]
+        if b_ok and a_ok and distance[a] > distance[b]:
+            target = theta2[b] + wrap_angle(theta2[a] - theta2[b])
+            out[k] = theta2[b] + (target - theta2[b]) * (distance[k] - distance[b]) / (distance[a] - distance[b])
+        elif b >= 0:
+            out[k] = theta2[b]
+        elif a < n:
+            out[k] = theta2[a]
+    return out

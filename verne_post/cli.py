@@ -186,7 +186,7 @@ def _ik_batch(machine: Machine, poses: str, output: str | None, tool_length: flo
     norm = np.linalg.norm(axis, axis=1)
     if np.any(norm < 1e-9):
         raise InputError("tool axis has zero length", poses, int(lines[np.argmax(norm < 1e-9)]))
-    result = solve_path(machine, tip, axis / norm[:, None], tool_length=tool_length)
+    result = solve_path(machine, tip, axis / norm[:, None], tool_length=tool_length).result
     labels = np.array([Status(s).label for s in range(len(Status))])[result.status]
     table = {
         "rho1": result.joints[:, 0], "rho2": result.joints[:, 1], "rho3": result.joints[:, 2],
@@ -269,3 +269,111 @@ def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: floa
     table = {"x": fk.tip[:, 0], "y": fk.tip[:, 1], "z": fk.tip[:, 2], "i": fk.axis[:, 0], "j": fk.axis[:, 1],
              "k": fk.axis[:, 2], "alpha": fk.alpha * scale, "status": labels}
     _write_csv(table, output, {"status": "%s"})
+
+
+# ----------------------------------------------------------------------------- post / check
+
+
+def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
+    options = [
+        click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False)),
+        machine_option,
+        click.option("--tool-length", type=float, default=None,
+                     help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
+        click.option("--work-offset", nargs=3, type=float, default=None,
+                     help="Part zero X Y Z in the table frame, mm (default: the machine file's)."),
+        click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
+        click.option("--tol", type=float, default=0.005, show_default=True,
+                     help="Tool tip deviation allowed between blocks, mm."),
+        click.option("--axis-tol", type=float, default=0.05, show_default=True,
+                     help="Tool axis deviation allowed between blocks, degrees."),
+        click.option("--report", "report_path", type=click.Path(dir_okay=False),
+                     help="Write violations and statistics as JSON."),
+        click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
+        click.option("--max-messages", type=int, default=20, show_default=True,
+                     help="Violations printed before the count."),
+    ]
+    for option in reversed(options):
+        function = option(function)
+    return function
+
+
+def _run_pipeline(cl_file: str, machine_path: str | None, tool_length: float | None,
+                  work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
+                  quiet: bool) -> tuple[Machine, Any, Any]:
+    from .pipeline import PostOptions, postprocess
+
+    if tol <= 0 or axis_tol <= 0:
+        raise InputError("--tol and --axis-tol must be positive")
+    machine = load_machine(machine_path)
+    options = PostOptions(work_offset=work_offset or None, tool_length=tool_length, units=units, tol=tol,
+                          axis_tol=axis_tol)
+    stages = ["parse", "ik", "linearise", "checks"]
+    show = not quiet and sys.stderr.isatty()
+    with click.progressbar(length=len(stages), label="verne-post", file=sys.stderr if show else _Null()) as bar:
+        result = postprocess(cl_file, machine, options, progress=lambda stage: bar.update(1))
+    return machine, options, result
+
+
+class _Null:
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+
+def _finish(machine: Machine, options: Any, result: Any, report_path: str | None, quiet: bool,
+            max_messages: int) -> None:
+    from .tables import write_json
+
+    if not quiet:
+        for warning in result.warnings[:max_messages]:
+            click.echo(f"verne-post: warning: {warning}", err=True)
+        if len(result.warnings) > max_messages:
+            click.echo(f"verne-post: ... and {len(result.warnings) - max_messages} more warnings", err=True)
+    if report_path:
+        write_json(report_path, result.report(machine, options))
+    if result.violations:
+        for v in result.violations[:max_messages]:
+            click.echo(f"verne-post: error: {result.poses.source}:{v.line}: {v.message}", err=True)
+        if len(result.violations) > max_messages:
+            click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
+        click.echo(f"verne-post: {len(result.violations)} violation(s): nothing written", err=True)
+        sys.exit(3)
+
+
+@main.command("post")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output G-code file (default: PART.nc).")
+@_post_options
+@user_errors
+def post_command(cl_file: str, output: str | None, machine_path: str | None, tool_length: float | None,
+                 work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
+                 report_path: str | None, quiet: bool, max_messages: int) -> None:
+    """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code."""
+    from .gcode import write_program
+    from .pipeline import gcode_format
+
+    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
+                                             quiet)
+    _finish(machine, options, result, report_path, quiet, max_messages)
+    target = output or str(Path(cl_file).with_suffix(".nc"))
+    write_program(result.program, gcode_format(machine), target)
+
+
+@main.command("check")
+@_post_options
+@user_errors
+def check_command(cl_file: str, machine_path: str | None, tool_length: float | None,
+                  work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
+                  report_path: str | None, quiet: bool, max_messages: int) -> None:
+    """Run every check of 'post' on PART.cls without writing a program."""
+    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
+                                             quiet)
+    _finish(machine, options, result, report_path, quiet, max_messages)
+    if not quiet:
+        click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "
+                   f"{len(result.blocks.joints) - len(result.poses)} inserted)", err=True)

@@ -210,10 +210,9 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat) -> list[tuple
         if not (np.isfinite(length) and np.isfinite(delta)):
             raise ValueError(f"{where}: tool {tool} length {length} / Delta {delta} is not finite")
         dec = fmt.linear_decimals
-        return [
-            (f"(TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)})", False),
-            (f"T{tool} M6", True),
-        ]
+        note = (f"(TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)})", False)
+        # Tool 0: the CL file gave tool data but no tool number; T0 M6 would unload the spindle.
+        return [note] if tool == 0 else [note, (f"T{tool} M6", True)]
     if isinstance(event, Spindle):
         if event.direction == "OFF":
             return [("M5", True)]

@@ -68,3 +68,12 @@ def write_table(path: str | os.PathLike[str], columns: dict[str, np.ndarray], fo
         for column in text[1:]:
             rows = np.char.add(np.char.add(rows, ","), column)
         handle.write("\n".join(rows.tolist()) + "\n")
+
+
+def write_json(path: str | os.PathLike[str], data: object) -> None:
+    """Write ``data`` as indented JSON, atomically."""
+    import json
+
+    with atomic_write(Path(path)) as handle:
+        json.dump(data, handle, indent=2, allow_nan=False)
+        handle.write("\n")

@@ -328,6 +328,8 @@ def _degenerate_solutions(geom: Geometry, rho: np.ndarray) -> tuple[np.ndarray, 
     g = geom
     out_i, out_p, out_a = [], [], []
     for i, (rho1, rho2, rho3) in enumerate(rho):
+        if not np.all(np.isfinite((rho1, rho2, rho3))):
+            continue
         a_, b_, e_ = (rho3 - rho2) * g.R1, 2.0 * (g.r1 * g.R2 - g.r4 * g.R1), (rho3 - rho2) * g.r1
         norm = np.hypot(a_, b_)
         if norm == 0 or abs(e_) > norm:

@@ -1,0 +1,119 @@
+"""The main job on every shipped example, checked through the G-code it writes.
+
+The G-code is read back (our own parse at full precision, and LinuxCNC's interpreter), taken
+through the forward kinematics with the tool length the program declares, and compared with
+the CL path read independently from the CL file.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import verne_post as vp
+from verne_post.cl import read_toolpath
+from verne_post.cli import main
+from verne_post.linearise import angle_to_arc, distance_to_segment
+from verne_post.rs274 import run_rs274
+
+EXAMPLES = Path(__file__).parent.parent / "examples"
+# (file, work offset X Y Z mm): the README gives the same offsets.
+CASES = [
+    ("nx_variable_axis_inch.cls", (0.0, 0.0, 0.0)),
+    ("nx_swarf_inch_crlf.cls", (0.0, 0.0, 0.0)),
+]
+TOL, AXIS_TOL = 0.005, 0.05
+_MOVE = re.compile(r"^(?:N\d+ )?G([01]) X(\S+) Y(\S+) Z(\S+) A(\S+) C(\S+)")
+_TOOL = re.compile(r"^\(TOOL (\d+) LENGTH (\S+) DELTA (\S+)\)")
+
+
+def read_gcode(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(joints (M, 5) mm/rad, rapid (M,), tool length (M,) mm) of every motion block."""
+    joints, rapid, lengths = [], [], []
+    length = np.nan
+    for text in path.read_text().splitlines():
+        tool = _TOOL.match(text)
+        if tool:
+            length = float(tool.group(2))
+        move = _MOVE.match(text)
+        if move:
+            values = [float(v) for v in move.groups()[1:]]
+            joints.append(values[:3] + list(np.radians(values[3:])))
+            rapid.append(move.group(1) == "0")
+            lengths.append(length)
+    return np.array(joints), np.array(rapid), np.array(lengths)
+
+
+def post(tmp_path: Path, name: str, offset: tuple[float, float, float], *extra: str) -> tuple[Path, dict]:
+    output, report = tmp_path / (Path(name).stem + ".nc"), tmp_path / "report.json"
+    result = CliRunner().invoke(main, [str(EXAMPLES / name), "-o", str(output), "--report", str(report), "--quiet",
+                                       "--work-offset", *map(str, offset), "--tol", str(TOL), "--axis-tol",
+                                       str(AXIS_TOL)])
+    assert result.exit_code == 0, result.stderr
+    return output, json.loads(report.read_text())
+
+
+@pytest.mark.parametrize(("name", "offset"), CASES)
+def test_example_gcode_follows_the_cl_path(tmp_path: Path, name: str, offset: tuple[float, float, float]) -> None:
+    machine = vp.load_machine()
+    output, report = post(tmp_path, name, offset)
+    assert report["ok"] and report["violations"] == []
+    joints, rapid, lengths = read_gcode(output)
+    assert np.isfinite(lengths).all()
+    fk = vp.forward_kinematics(machine, joints, tool_length=lengths)
+    assert fk.reachable.all()
+    cl = read_toolpath(EXAMPLES / name)
+    tip, axis = cl.tip + np.asarray(offset), cl.axis
+    # Walk the blocks along the CL path: each block end lies on the CL move it belongs to
+    # (within 1 micrometre) and every CL pose is reached.
+    k = 0
+    for m in range(len(joints)):
+        while True:
+            at_pose = np.linalg.norm(fk.tip[m] - tip[k]) <= 1e-3
+            on_move = k > 0 and not cl.rapid[k] and distance_to_segment(fk.tip[m:m + 1], tip[k - 1:k],
+                                                                         tip[k:k + 1])[0] <= 1e-3
+            if at_pose or on_move:
+                break
+            k += 1
+            assert k < len(tip), f"block {m} of {output.name} is off the CL path"
+        if at_pose:
+            angle = 2 * np.arcsin(np.linalg.norm(fk.axis[m] - axis[k]) / 2)
+            assert angle <= np.radians(vp.load_machine().pole.cone) + 1e-6
+    assert k == len(tip) - 1
+    # Between blocks: the joint interpolation stays within the tolerances (10 samples a block).
+    feed = np.flatnonzero(~rapid[1:] & (lengths[1:] == lengths[:-1])) + 1
+    s = (np.arange(10) + 0.5) / 10
+    rows = np.repeat(feed, len(s))
+    f = np.tile(s, len(feed))
+    q = joints[rows - 1] + f[:, None] * (joints[rows] - joints[rows - 1])
+    mid = vp.forward_kinematics(machine, q, tool_length=lengths[rows])
+    assert np.max(distance_to_segment(mid.tip, fk.tip[rows - 1], fk.tip[rows])) <= TOL
+    assert np.degrees(np.max(angle_to_arc(mid.axis, fk.axis[rows - 1], fk.axis[rows]))) <= AXIS_TOL
+    assert report["points"]["blocks"] >= len(joints)
+
+
+@pytest.mark.parametrize(("name", "offset"), CASES)
+def test_example_passes_linuxcnc(tmp_path: Path, name: str, offset: tuple[float, float, float]) -> None:
+    output, _ = post(tmp_path, name, offset)
+    joints, rapid, _ = read_gcode(output)
+    tools = [int(t) for t in re.findall(r"^T(\d+) M6", output.read_text(), re.M)]
+    result = run_rs274(output, tool_numbers=tools or [1])
+    assert result.errors == []
+    expected = np.column_stack([joints[:, :3], np.degrees(joints[:, 3]), np.zeros(len(joints)),
+                                np.degrees(joints[:, 4])])
+    assert result.moves.shape == expected.shape
+    np.testing.assert_allclose(result.moves, expected, atol=0.5e-4 + 1e-9)
+    assert np.array_equal(result.kinds == 0, rapid)
+
+
+def test_repeated_runs_give_identical_files(tmp_path: Path) -> None:
+    first, _ = post(tmp_path, CASES[0][0], CASES[0][1])
+    text = first.read_text()
+    second, _ = post(tmp_path, CASES[0][0], CASES[0][1])
+    assert second.read_text() == text
+    assert "(TOOL 0 LENGTH 76.2000 DELTA 572.0000)" in text

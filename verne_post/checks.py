@@ -1,0 +1,124 @@
+"""Stage 3: everything the machine cannot do, named by CL line (before anything is written).
+
+Checked at every block end (CL points and inserted points) and along the motion between them:
+feed blocks at their midpoint (joint limits are boxes, so block ends suffice for them; reach,
+rod clearance and singularity margins are not), rapids at several points of their
+joint-space line. Messages read like ``slider rho2 = 1312.4 mm exceeds max 1300.0 mm``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .api import JOINT_NAMES, IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
+from .kinematics import Margins
+from .machine import Machine
+
+_JOINT_WORDS = ("slider rho1", "slider rho2", "slider rho3", "tilt theta1", "rotary theta2")
+RAPID_SAMPLES = np.arange(1, 8) / 8.0
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One thing the machine cannot do, at a CL line."""
+
+    line: int
+    kind: str  # limit, rod_clearance, unreachable, singular, path, branch
+    message: str
+
+
+def _value(joint: int, value: float) -> str:
+    return f"{value:.3f} mm" if joint < 3 else f"{np.degrees(value):.3f} deg"
+
+
+def pose_violations(machine: Machine, joints: np.ndarray, status: np.ndarray, found: Margins, lines: np.ndarray,
+                    where: str = "", limit: int = 10_000) -> list[Violation]:
+    """Violations of N poses whose status is not ok, ``limit`` at most (the worst kinds first)."""
+    out: list[Violation] = []
+    lower, upper = joint_bounds(machine)
+    t = machine.singularity
+    for k in np.flatnonzero(status != Status.OK)[:limit]:
+        line = int(lines[k])
+        if status[k] == Status.UNREACHABLE:
+            out.append(Violation(line, "unreachable", f"{where}pose is out of the machine's reach"))
+            continue
+        q = joints[k]
+        for j in range(5):
+            if q[j] > upper[j]:
+                out.append(Violation(line, "limit", f"{where}{_JOINT_WORDS[j]} = {_value(j, q[j])} exceeds max "
+                                                      f"{_value(j, upper[j])}"))
+            elif q[j] < lower[j]:
+                out.append(Violation(line, "limit", f"{where}{_JOINT_WORDS[j]} = {_value(j, q[j])} is below min "
+                                                      f"{_value(j, lower[j])}"))
+        if found.rod_clearance[k] < t.rod_clearance_min:
+            out.append(Violation(line, "rod_clearance", f"{where}leg I rods {found.rod_clearance[k]:.2f} mm apart "
+                                                          f"(min {t.rod_clearance_min:.2f} mm: rods would cross)"))
+        for name, threshold in (("serial", t.serial_min), ("parallel", t.parallel_min), ("machine", t.machine_min)):
+            value = getattr(found, name)[k]
+            if value < threshold:
+                out.append(Violation(line, "singular", f"{where}too close to a {name} singularity (margin "
+                                                         f"{value:.4f}, min {threshold:.4f})"))
+    return out
+
+
+@dataclass(frozen=True)
+class MotionSamples:
+    """Poses on the joint-space lines between block ends, for the along-motion checks."""
+
+    joints: np.ndarray
+    lines: np.ndarray
+    status: np.ndarray
+    margins: Margins
+
+
+def motion_samples(machine: Machine, joints: np.ndarray, rapid: np.ndarray, tool_length: np.ndarray,
+                   lines: np.ndarray) -> MotionSamples:
+    """Sample the joint-space line into every block: feed blocks at 1/2, rapids at k/8."""
+    into = np.arange(1, len(joints))
+    same_tool = tool_length[into] == tool_length[into - 1]
+    rows, fractions = [], []
+    for chosen, grid in ((into[~rapid[into] & same_tool], np.array([0.5])), (into[rapid[into]], RAPID_SAMPLES)):
+        rows.append(np.repeat(chosen, len(grid)))
+        fractions.append(np.tile(grid, len(chosen)))
+    row, f = np.concatenate(rows), np.concatenate(fractions)
+    q = joints[row - 1] + f[:, None] * (joints[row] - joints[row - 1])
+    fk = forward_kinematics(machine, q, tool_length=tool_length[row])
+    found = pose_margins(machine, q, fk.platform, fk.alpha, fk.reachable, tool_length[row])
+    return MotionSamples(q, lines[row], classify(machine, q, fk.reachable, found), found)
+
+
+def check_program(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray, lines: np.ndarray,
+                  limit: int = 10_000) -> tuple[list[Violation], MotionSamples]:
+    """All violations at block ends and along the motion, sorted by line, ``limit`` at most each."""
+    at_ends = pose_violations(machine, blocks.joints, blocks.status, blocks.margins, lines, limit=limit)
+    samples = motion_samples(machine, blocks.joints, rapid, tool_length, lines)
+    along = pose_violations(machine, samples.joints, samples.status, samples.margins, samples.lines,
+                            where="on the way to this point: ", limit=limit)
+    unique: dict[tuple[int, str], Violation] = {}
+    for violation in at_ends + along:  # one message per CL line and kind: inserted points repeat it
+        unique.setdefault((violation.line, violation.kind), violation)
+    return sorted(unique.values(), key=lambda v: (v.line, v.kind)), samples
+
+
+def theta2_rate_warnings(machine: Machine, joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray,
+                         lines: np.ndarray, source: str) -> list[str]:
+    """CL moves where the rotary table turns faster per mm of tip travel than the machine file allows
+    (the tool axis passing close to the table normal, outside the pole cone); one per line."""
+    max_rate = np.radians(machine.pole.max_theta2_rate)
+    turn = np.abs(np.diff(joints[:, 4]))
+    travel = np.linalg.norm(np.diff(tip, axis=0), axis=1)
+    fast = ~rapid[1:] & (turn > max_rate * np.maximum(travel, 1e-9)) & (turn > 1e-6)
+    rate = np.degrees(turn) / np.maximum(travel, 1e-9)
+    worst: dict[int, float] = {}
+    for k in np.flatnonzero(fast):
+        line = int(lines[k + 1])
+        worst[line] = max(worst.get(line, 0.0), float(rate[k]))
+    return [f"{source}:{line}: rotary theta2 turns at up to {value:.0f} deg per mm of tool travel (max "
+            f"{machine.pole.max_theta2_rate:g}): the tool axis passes close to the table normal"
+            for line, value in worst.items()]
+
+
+__all__ = ["JOINT_NAMES", "MotionSamples", "Violation", "check_program", "motion_samples", "pose_violations",
+           "theta2_rate_warnings"]

@@ -1,0 +1,152 @@
+"""Stage 4: keep the tool on the programmed path between blocks.
+
+The controller interpolates linearly in joint space, which bends the tool tip away from the
+straight CL segment and turns the axis off its interpolated direction. Blocks are split at
+their Cartesian midpoint (tip linear, axis by spherical interpolation, joints by IK) until
+the forward kinematics of the joint interpolation stays within the tolerances, all blocks of
+the program at once, level by level. Units: mm, rad; table frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .api import IKResult, Status, concatenate, forward_kinematics
+from .branch import PathIK, solve_with_theta2
+from .machine import Machine
+from .poses import MachinePoses
+
+#: Fractions of a block where the deviation is measured while splitting. The error of a
+#: linear interpolation of a smooth map is close to a parabola, largest near the middle.
+SAMPLES = np.array([0.25, 0.5, 0.75])
+#: Splitting aims at this share of the tolerance, so that denser checks also pass.
+MARGIN = 0.8
+MAX_LEVELS = 24
+
+
+def slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Spherical interpolation of unit vectors (N, 3) at fractions u (N,)."""
+    cos = np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)
+    omega = np.arccos(cos)
+    small = omega < 1e-9
+    sin = np.where(small, 1.0, np.sin(omega))
+    wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / sin)
+    wb = np.where(small, u, np.sin(u * omega) / sin)
+    out = wa[:, None] * a + wb[:, None] * b
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance (mm) from points p (N, 3) to segments [a, b]."""
+    d = b - a
+    length2 = np.sum(d * d, axis=-1)
+    t = np.clip(np.sum((p - a) * d, axis=-1) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    return np.linalg.norm(p - a - t[:, None] * d, axis=-1)
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arcsin(np.clip(np.linalg.norm(u - v, axis=-1) / 2.0, 0.0, 1.0))
+
+
+def angle_to_arc(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (rad) from unit vectors p to the shorter great-circle arcs from a to b."""
+    normal = np.cross(a, b)
+    norm = np.linalg.norm(normal, axis=-1)
+    ends = np.minimum(_angle(p, a), _angle(p, b))
+    safe = norm > 1e-12
+    unit = normal / np.where(safe, norm, 1.0)[:, None]
+    out_of_plane = np.arcsin(np.clip(np.abs(np.sum(p * unit, axis=-1)), 0.0, 1.0))
+    q = p - np.sum(p * unit, axis=-1, keepdims=True) * unit
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-300)
+    inside = np.abs(_angle(a, q) + _angle(q, b) - _angle(a, b)) < 1e-9
+    return np.where(safe & inside, out_of_plane, ends)
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """The program's block ends after linearisation, in order (M of them)."""
+
+    joints: np.ndarray  # (M, 5) mm, rad
+    tip: np.ndarray  # (M, 3) mm, table frame: the point on the CL path this block ends at
+    axis: np.ndarray  # (M, 3) axis on the CL path (realised axis in the pole cone)
+    pose: np.ndarray  # (M,) index of the CL pose whose move the block belongs to
+    fraction: np.ndarray  # (M,) position along that move, 1 at the CL pose
+    status: np.ndarray  # (M,) Status
+    result: IKResult  # per block: the IK result (margins, alpha, ...)
+    unresolved: np.ndarray  # (K,) CL pose indices whose move could not be brought within tolerance
+
+
+def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray, tip1: np.ndarray,
+              axis0: np.ndarray, axis1: np.ndarray, lengths: np.ndarray, fractions: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Largest tip distance (mm) and axis angle (rad) from the CL path over the given fractions
+    of the joint-space blocks q0 -> q1 (tool lengths mm per block)."""
+    m = len(q0)
+    f = np.repeat(fractions[None, :], m, axis=0).ravel()
+    rows = np.repeat(np.arange(m), len(fractions))
+    fk = forward_kinematics(machine, q0[rows] + f[:, None] * (q1[rows] - q0[rows]), tool_length=lengths[rows])
+    tip_error = distance_to_segment(fk.tip, tip0[rows], tip1[rows])
+    axis_error = angle_to_arc(fk.axis, axis0[rows], axis1[rows])
+    tip_error = np.where(fk.reachable, tip_error, np.inf).reshape(m, -1).max(axis=1)
+    axis_error = np.where(fk.reachable, axis_error, np.inf).reshape(m, -1).max(axis=1)
+    return tip_error, axis_error
+
+
+def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float, axis_tol: float, cone: float
+              ) -> Blocks:
+    """Insert poses into feed moves until the joint interpolation is within ``tol`` (mm) and
+    ``axis_tol`` (rad) of the CL path. Rapids and moves across a tool change are left alone."""
+    n = len(poses)
+    result = path.result
+    joints, tip, axis = [result.joints], [poses.tip], [path.axis]
+    seg, frac = [np.arange(n)], [np.ones(n)]
+    results = [result]
+    reached = result.status != Status.UNREACHABLE
+    movable = np.r_[False, ~poses.rapid[1:] & (poses.tool_length[1:] == poses.tool_length[:-1])
+                    & reached[1:] & reached[:-1]]
+    left, right = np.flatnonzero(movable) - 1, np.flatnonzero(movable)
+    unresolved: list[np.ndarray] = []
+    size = n
+    for level in range(MAX_LEVELS + 1):
+        if left.size == 0:
+            break
+        all_joints, all_tip, all_axis = (np.concatenate(x) for x in (joints, tip, axis))
+        all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
+        k = all_seg[right]
+        lengths = poses.tool_length[k]
+        tip_error, axis_error = deviation(machine, all_joints[left], all_joints[right], all_tip[left],
+                                          all_tip[right], all_axis[left], all_axis[right], lengths, SAMPLES)
+        split = (tip_error > MARGIN * tol) | (axis_error > MARGIN * axis_tol)
+        if level == MAX_LEVELS:
+            unresolved.append(k[split])
+            break
+        left, right, k, lengths = left[split], right[split], k[split], lengths[split]
+        if left.size == 0:
+            break
+        u0 = np.where(all_seg[left] == k, all_frac[left], 0.0)
+        u = 0.5 * (u0 + all_frac[right])
+        start, end = poses.tip[k - 1], poses.tip[k]
+        mid_tip = start + u[:, None] * (end - start)
+        mid_axis = slerp(path.axis[k - 1], path.axis[k], u)
+        theta2 = 0.5 * (all_joints[left, 4] + all_joints[right, 4])
+        mid, realised = solve_with_theta2(machine, mid_tip, mid_axis, lengths, theta2, cone)
+        bad = mid.status == Status.UNREACHABLE
+        unresolved.append(k[bad])
+        new = np.arange(size, size + len(u))
+        size += len(u)
+        joints.append(mid.joints)
+        tip.append(mid_tip)
+        axis.append(realised)
+        seg.append(k)
+        frac.append(u)
+        results.append(mid)
+        keep = ~bad
+        left, right = np.r_[left[keep], new[keep]], np.r_[new[keep], right[keep]]
+    all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
+    order = np.lexsort((all_frac, all_seg))
+    merged = concatenate(results).rows(order)
+    return Blocks(merged.joints, np.concatenate(tip)[order], np.concatenate(axis)[order], all_seg[order],
+                  all_frac[order], merged.status, merged,
+                  np.unique(np.concatenate(unresolved)) if unresolved else np.empty(0, int))

@@ -1,0 +1,189 @@
+"""The main job: CL file -> checked, linearised joint-space program (the CLI is a thin layer).
+
+parse CL -> machine poses -> IK and branch choice -> linearisation -> checks -> durations ->
+writer. Each stage is its own module; this one wires them and keeps the statistics.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from . import __version__
+from .api import JOINT_NAMES, Status, joint_bounds
+from .branch import PathIK, solve_path
+from .checks import Violation, check_program, theta2_rate_warnings
+from .cl import read_toolpath
+from .gcode import GcodeFormat, Program
+from .linearise import Blocks, linearise
+from .machine import Machine
+from .poses import MachinePoses, machine_poses
+from .toolpath import ToolChange
+
+
+@dataclass(frozen=True)
+class PostOptions:
+    """User choices (mm and degrees, as on the command line)."""
+
+    work_offset: tuple[float, float, float] | None = None  # part zero in the table frame; None: machine file
+    tool_length: float | None = None  # mm, for tools whose length nothing else gives
+    units: Literal["mm", "inch"] | None = None  # override the CL file's units
+    tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
+    axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
+
+
+@dataclass
+class PostResult:
+    """What the pipeline produced; ``program`` is None when there are violations."""
+
+    poses: MachinePoses
+    path: PathIK
+    blocks: Blocks
+    rapid: np.ndarray  # (M,) per block
+    duration: np.ndarray  # (M,) s
+    violations: list[Violation]
+    warnings: list[str]
+    program: Program | None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
+        """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
+        joints = self.blocks.joints
+        finite = np.all(np.isfinite(joints), axis=1)
+        ranges = {}
+        for j, name in enumerate(JOINT_NAMES):
+            values = joints[finite, j] * (1.0 if j < 3 else 180 / np.pi)
+            ranges[name] = [float(values.min()), float(values.max())] if values.size else None
+        margins = self.blocks.result.margins
+        tips = self.blocks.tip
+        feed_length = float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[~self.rapid[1:]]))
+        return {
+            "source": self.poses.source,
+            "machine": machine.source,
+            "verne_post": __version__,
+            "ok": not self.violations,
+            "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in self.violations],
+            "warnings": self.warnings,
+            "points": {"cl": len(self.poses), "inserted": int(len(tips) - len(self.poses)), "blocks": len(tips),
+                       "in_pole_cone": int(self.path.in_cone.sum())},
+            "joint_ranges": ranges,
+            "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
+            "smallest_margins": {name: _nanmin(getattr(margins, name)) for name in
+                                 ("serial", "parallel", "machine", "rod_clearance")},
+            "path_length_mm": {"feed": feed_length,
+                               "rapid": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[self.rapid[1:]]))},
+            "estimated_time_s": float(np.sum(self.duration)),
+            "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol},
+            "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
+                       "length_from": t.source} for t in self.poses.tools],
+            "seconds": self.seconds,
+        }
+
+
+def _nanmin(values: np.ndarray) -> float | None:
+    finite = values[np.isfinite(values)]
+    return float(finite.min()) if finite.size else None
+
+
+def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
+    """Seconds per block before time-parametrisation: programmed feed, never faster than a joint.
+
+    Feed blocks take their Cartesian length over the programmed feed (inverse-time moves their
+    share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
+    rotary-only block is never of zero duration. The first block and rapids: joint-limit time.
+    """
+    lower_velocity = np.array([getattr(machine.joints, n).velocity for n in JOINT_NAMES])
+    lower_velocity[3:] = np.radians(lower_velocity[3:])
+    step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
+    joint_time = np.max(step / lower_velocity, axis=1)
+    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
+    feed = poses.feed[blocks.pose]
+    previous = np.r_[0.0, blocks.fraction[:-1]]
+    share = np.where(blocks.pose == np.r_[-1, blocks.pose[:-1]], blocks.fraction - previous, blocks.fraction)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cartesian = np.where(poses.inverse_time[blocks.pose], 60.0 * share / feed, 60.0 * length / feed)
+    duration = np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
+    duration[0] = joint_time[0]
+    return duration
+
+
+def postprocess(path: str | Path, machine: Machine, options: PostOptions,
+                progress: Callable[[str], None] = lambda stage: None) -> PostResult:
+    """Run every stage except writing. Raises InputError for bad input; violations are returned."""
+    seconds: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        seconds[stage] = now - clock
+        clock = now
+        progress(stage)
+
+    toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.tol)
+    lap("parse")
+    poses = machine_poses(toolpath, machine, work_offset=options.work_offset, tool_length=options.tool_length)
+    cone = np.radians(machine.pole.cone)
+    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
+    lap("ik")
+    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
+    lap("linearise")
+    rapid = poses.rapid[blocks.pose] & (blocks.fraction == 1.0)
+    rapid[0] = True  # where the machine stands before the program is unknown: position with G0
+    lines = poses.line[blocks.pose]
+    violations, _ = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], lines)
+    source = poses.source
+    for k in blocks.unresolved:
+        violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
+                                                                f"{options.axis_tol} deg of the CL path"))
+    for k in np.flatnonzero(solved.pair_switch):
+        violations.append(Violation(int(poses.line[k]), "branch", "no single tool-axis angle pair reaches this whole "
+                                                                  "cut: the table would turn half a turn mid-cut"))
+    violations.sort(key=lambda v: (v.line, v.kind))
+    warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
+    lap("checks")
+    duration = block_durations(machine, poses, blocks, rapid)
+    program = None
+    if not violations:
+        program = _program(machine, poses, blocks, rapid, duration, options)
+    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, seconds)
+
+
+def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
+             options: PostOptions) -> Program:
+    # Blocks that move no joint (repeated CL points) take no time and are left out.
+    moves = np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)]
+    index = np.flatnonzero(moves)
+    events = [replace(e, index=int(np.searchsorted(blocks.pose[index], e.index, side="left"))) for e in poses.events]
+    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    tools = {t.number: (t.length, t.delta) for t in poses.tools}
+    header = (
+        f"POSTPROCESSOR VERNE-POST {__version__}",
+        f"MACHINE {machine.source} ({machine.name})",
+        f"SOURCE {Path(poses.source).name}",
+        "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
+        "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
+        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(index)} "
+        f"(CL POINTS {len(poses)}, INSERTED {len(blocks.joints) - len(poses)})",
+        f"ESTIMATED TIME {np.sum(duration):.1f} S (PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS)",
+    )
+    if any(isinstance(e, ToolChange) and e.tool == 0 for e in events):
+        header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
+    return Program(
+        joints=blocks.joints[index], rapid=rapid[index], duration=duration[index],
+        line=poses.line[blocks.pose][index], events=tuple(events), part_name=poses.part_name, header=header,
+        tool_lengths=tools,
+    )
+
+
+def gcode_format(machine: Machine) -> GcodeFormat:
+    g = machine.gcode
+    return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
+
+
+__all__ = ["PostOptions", "PostResult", "Status", "block_durations", "gcode_format", "joint_bounds", "postprocess"]

@@ -1,0 +1,96 @@
+"""Stage 2: CL poses (part frame) -> machine poses (table frame) with tools and sequences.
+
+The work offset puts the part zero in the table frame (mm, same axes). Each pose gets the
+length of the tool it is cut with (mm): from the CL file (TLDATA, LOADTL, CUTTER), else from
+the machine's tool table, else from ``--tool-length``; a tool with no known length is an
+error, never a silent zero. Sequences are the stretches the branch stage keeps continuous:
+a new one starts at every rapid, tool change and feed-mode change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .machine import Machine
+from .toolpath import Event, ToolChange, Toolpath
+
+
+@dataclass(frozen=True)
+class ToolUse:
+    """A loaded tool: number, gauge length and Delta (P to tool tip), mm; where it was loaded."""
+
+    number: int
+    length: float
+    delta: float
+    line: int
+    source: str  # "CL file", "machine tool table" or "--tool-length"
+
+
+@dataclass(frozen=True)
+class MachinePoses:
+    """Poses in the table frame, ready for the kinematics. Arrays (N, ...) as in Toolpath."""
+
+    source: str
+    part_name: str | None
+    tip: np.ndarray  # (N, 3) mm, table frame
+    axis: np.ndarray  # (N, 3) unit, table frame
+    line: np.ndarray
+    rapid: np.ndarray
+    feed: np.ndarray  # mm/min (1/min where inverse_time)
+    inverse_time: np.ndarray
+    tool: np.ndarray
+    tool_length: np.ndarray  # (N,) mm
+    sequence: np.ndarray  # (N,) int
+    events: tuple[Event, ...]
+    tools: tuple[ToolUse, ...]  # in load order
+    warnings: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.tip)
+
+
+def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, source: str) -> tuple[float, str]:
+    if change.length is not None:
+        return change.length, "CL file"
+    if change.tool in machine.tools:
+        return machine.tools[change.tool].length, "machine tool table"
+    if fallback is not None:
+        return fallback, "--tool-length"
+    raise InputError(f"tool {change.tool} has no length: give it in the CL file (TLDATA/LOADTL), in the "
+                     f"machine's tool table, or with --tool-length", source, change.line)
+
+
+def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[float, float, float] | None = None,
+                  tool_length: float | None = None) -> MachinePoses:
+    """Table-frame poses with tool lengths and continuity sequences (see module docstring)."""
+    n = len(toolpath)
+    offset = np.asarray(machine.work_offset if work_offset is None else work_offset, dtype=float)
+    changes = [e for e in toolpath.events if isinstance(e, ToolChange)]
+    tools: list[ToolUse] = []
+    lengths = np.full(n, np.nan)
+    first = changes[0].index if changes else n
+    if first > 0:
+        if tool_length is None:
+            raise InputError("motion before any tool is loaded and no --tool-length given", toolpath.source,
+                             int(toolpath.line[0]))
+        lengths[:first] = tool_length
+        tools.append(ToolUse(0, tool_length, machine.geometry.spindle_nose + tool_length, int(toolpath.line[0]),
+                             "--tool-length"))
+    for k, change in enumerate(changes):
+        length, origin = _tool_length(machine, change, tool_length, toolpath.source)
+        end = changes[k + 1].index if k + 1 < len(changes) else n
+        lengths[change.index:end] = length
+        tools.append(ToolUse(change.tool, length, machine.geometry.spindle_nose + length, change.line, origin))
+    boundary = toolpath.rapid.copy()
+    boundary[[c.index for c in changes if c.index < n]] = True
+    boundary[1:] |= toolpath.inverse_time[1:] != toolpath.inverse_time[:-1]
+    boundary[0] = True
+    return MachinePoses(
+        source=toolpath.source, part_name=toolpath.part_name, tip=toolpath.tip + offset, axis=toolpath.axis,
+        line=toolpath.line, rapid=toolpath.rapid, feed=toolpath.feed, inverse_time=toolpath.inverse_time,
+        tool=toolpath.tool, tool_length=lengths, sequence=np.cumsum(boundary) - 1, events=toolpath.events,
+        tools=tuple(tools), warnings=toolpath.warnings,
+    )
