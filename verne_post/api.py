@@ -69,7 +69,8 @@ class IKResult:
     phi: np.ndarray  # (N, 2) tool-axis angles (phi1, phi2), rad
     pair: np.ndarray  # (N,) angle pair used: +1 or -1
     status: np.ndarray  # (N,) Status values
-    margins: Margins  # (N,) each, NaN where unreachable
+    margins: Margins  # (N,) each, NaN where unreachable (or not computed)
+    platform: np.ndarray  # (N, 3) platform centre P, mm, base frame
 
     def take(self, mask: np.ndarray, other: IKResult) -> IKResult:
         """Rows of ``self`` where ``mask``, of ``other`` elsewhere."""
@@ -133,10 +134,23 @@ def concatenate(results: list[IKResult]) -> IKResult:
     return _fieldwise(lambda *arrays: np.concatenate(arrays), *results)
 
 
-def _status(machine: Machine, ik: MachineIK, pair: int, tool_length: float) -> IKResult:
-    found = pose_margins(machine, ik.joints, ik.platform, ik.alpha, ik.reachable, tool_length)
-    status = classify(machine, ik.joints, ik.reachable, found)
-    return IKResult(ik.joints, ik.alpha, ik.phi, np.full(len(ik.alpha), pair, np.int8), status, found)
+def assess(machine: Machine, result: IKResult, tool_length: float | np.ndarray = 0.0) -> IKResult:
+    """``result`` with its margins and status computed (tool length mm, one or per pose)."""
+    reachable = result.status != Status.UNREACHABLE
+    found = pose_margins(machine, result.joints, result.platform, result.alpha, reachable, tool_length)
+    return replace(result, margins=found, status=classify(machine, result.joints, reachable, found))
+
+
+def _status(machine: Machine, ik: MachineIK, pair: np.ndarray | int, tool_length: float, with_margins: bool
+            ) -> IKResult:
+    """IKResult of a kinematic solution; without margins only reach, travel and rod clearance count."""
+    n = len(ik.alpha)
+    g = machine.geometry
+    nan = np.full(n, np.nan)
+    found = Margins(nan, nan, nan, g.R1 * np.cos(ik.alpha) - g.r1)
+    result = IKResult(ik.joints, ik.alpha, ik.phi, np.broadcast_to(np.asarray(pair, np.int8), (n,)).copy(),
+                      classify(machine, ik.joints, ik.reachable, found), found, ik.platform)
+    return assess(machine, result, tool_length) if with_margins else result
 
 
 def _as_poses(tip: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,16 +164,28 @@ def _as_poses(tip: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return tip, axis / norm
 
 
-def inverse_kinematics_pairs(machine: Machine, tip: np.ndarray, axis: np.ndarray, *, tool_length: float = 0.0,
-                             theta2_at_pole: np.ndarray | float = 0.0) -> tuple[IKResult, IKResult]:
-    """Working-mode IK for both tool-axis angle pairs (+1, -1); tip (N, 3) mm, axis (N, 3), table frame.
+def inverse_kinematics_pair(machine: Machine, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray | int, *,
+                            tool_length: float = 0.0, theta2_at_pole: np.ndarray | float = 0.0,
+                            with_margins: bool = True) -> IKResult:
+    """Working-mode IK with the given tool-axis angle pair (+1 / -1, one or per pose).
 
-    ``theta2_at_pole`` (rad) is used where the axis is along the table normal.
+    tip (N, 3) mm, axis (N, 3), table frame; ``theta2_at_pole`` (rad) is used where the axis is
+    along the table normal. ``with_margins=False`` skips the singularity margins (faster;
+    then the status knows reach, travel limits and rod clearance only).
     """
     tip, axis = _as_poses(tip, axis)
-    geom = machine.kinematic_geometry(tool_length)
-    plus, minus = (machine_ik_working(geom, tip, axis, pair=p, theta2_at_pole=theta2_at_pole) for p in (1, -1))
-    return _status(machine, plus, 1, tool_length), _status(machine, minus, -1, tool_length)
+    ik = machine_ik_working(machine.kinematic_geometry(tool_length), tip, axis, pair=pair,
+                            theta2_at_pole=theta2_at_pole)
+    return _status(machine, ik, pair, tool_length, with_margins)
+
+
+def inverse_kinematics_pairs(machine: Machine, tip: np.ndarray, axis: np.ndarray, *, tool_length: float = 0.0,
+                             theta2_at_pole: np.ndarray | float = 0.0, with_margins: bool = True
+                             ) -> tuple[IKResult, IKResult]:
+    """Working-mode IK for both tool-axis angle pairs (+1, -1); see :func:`inverse_kinematics_pair`."""
+    plus, minus = (inverse_kinematics_pair(machine, tip, axis, p, tool_length=tool_length,
+                                           theta2_at_pole=theta2_at_pole, with_margins=with_margins) for p in (1, -1))
+    return plus, minus
 
 
 def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
@@ -205,10 +231,12 @@ class FKResult:
     reachable: np.ndarray  # (N,) bool
 
 
-def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: float | np.ndarray = 0.0) -> FKResult:
+def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: float | np.ndarray = 0.0,
+                       alpha_guess: np.ndarray | None = None) -> FKResult:
     """Tool tip (mm) and axis in the table frame, machine's assembly mode, for joints (N, 5) mm/rad.
 
-    ``tool_length`` (mm) is one value or one per joint set.
+    ``tool_length`` (mm) is one value or one per joint set; ``alpha_guess`` (rad, per joint
+    set) starts the platform-tilt iteration near a known neighbour (along a path).
     """
     joints = np.atleast_2d(np.asarray(joints, dtype=float))
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (len(joints),))
@@ -216,7 +244,8 @@ def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: flo
                    np.empty((len(joints), 3)), np.empty(len(joints), bool))
     for length in np.unique(lengths):
         rows = lengths == length
-        fk = machine_fk_working(machine.kinematic_geometry(float(length)), joints[rows])
+        guess = None if alpha_guess is None else np.asarray(alpha_guess)[rows]
+        fk = machine_fk_working(machine.kinematic_geometry(float(length)), joints[rows], guess)
         for name, value in (("tip", fk.tip), ("axis", fk.axis), ("alpha", fk.alpha), ("platform", fk.platform),
                             ("reachable", fk.reachable)):
             getattr(out, name)[rows] = value

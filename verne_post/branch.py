@@ -13,11 +13,12 @@ the path continues on the other pair, which is the continuous motion (theta1 pas
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from .api import IKResult, Status, inverse_kinematics_pairs, joint_bounds
+from .api import IKResult, Status, assess, inverse_kinematics_pair, joint_bounds
 from .kinematics import axis_from_angles, wrap_angle
 from .machine import Machine
 
@@ -37,19 +38,23 @@ def _pole_angle(axis: np.ndarray) -> np.ndarray:
     return np.arctan2(np.hypot(axis[:, 0], axis[:, 1]), axis[:, 2])
 
 
-def _pairs(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray,
-           theta2_at_pole: np.ndarray) -> tuple[IKResult, IKResult]:
-    """Working-mode solutions of both pairs, grouped by tool length (mm)."""
-    plus = minus = None
+def _by_length(lengths: np.ndarray, n: int, solve: Callable[[np.ndarray, float], IKResult]) -> IKResult:
+    """Run ``solve(rows, tool_length)`` per tool length (mm) and gather the rows back in order."""
+    out: IKResult | None = None
     for length in np.unique(lengths):
         rows = np.flatnonzero(lengths == length)
-        p, m = inverse_kinematics_pairs(machine, tip[rows], axis[rows], tool_length=float(length),
-                                        theta2_at_pole=theta2_at_pole[rows])
-        if plus is None:  # first group: allocate full-length results, then fill group by group
-            plus, minus = (r.rows(np.zeros(len(tip), int)) for r in (p, m))
-        plus, minus = plus.scatter(rows, p), minus.scatter(rows, m)
-    assert plus is not None and minus is not None
-    return plus, minus
+        part = solve(rows, float(length))
+        out = part.rows(np.zeros(n, int)) if out is None else out  # allocate full length once
+        out = out.scatter(rows, part)
+    assert out is not None
+    return out
+
+
+def _pair_results(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray, pair: np.ndarray,
+                  theta2_at_pole: np.ndarray, with_margins: bool) -> IKResult:
+    return _by_length(lengths, len(tip), lambda rows, length: inverse_kinematics_pair(
+        machine, tip[rows], axis[rows], pair[rows], tool_length=length, theta2_at_pole=theta2_at_pole[rows],
+        with_margins=with_margins))
 
 
 def solve_with_theta2(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray,
@@ -58,7 +63,7 @@ def solve_with_theta2(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengt
 
     Off the pole cone the angle pair whose theta2 is nearest ``theta2`` (mod 2 pi) is used and
     theta2 is unwrapped next to it. Inside the cone theta2 is imposed and the axis becomes its
-    projection on the plane that theta2 allows (phi1 signed).
+    projection on the plane that theta2 allows (phi1 signed: its sign picks the pair).
     """
     axis = axis.copy()
     in_cone = _pole_angle(axis) < cone
@@ -66,11 +71,10 @@ def solve_with_theta2(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengt
     along = np.stack([np.sin(phi2), -np.cos(phi2)], axis=-1)
     phi1 = np.arctan2(np.sum(axis[in_cone, :2] * along, axis=-1), axis[in_cone, 2])
     axis[in_cone] = axis_from_angles(phi1, phi2)
-    plus, minus = _pairs(machine, tip, axis, lengths, theta2)
-    # Inside the cone, pair +1 stands for phi1 >= 0 and pair -1 for phi1 < 0 of the imposed phi2.
-    use_plus = np.abs(wrap_angle(plus.joints[:, 4] - theta2)) <= np.abs(wrap_angle(minus.joints[:, 4] - theta2))
-    use_plus[in_cone] = phi1 >= 0
-    chosen = plus.take(use_plus, minus)
+    theta2_plus = -np.arctan2(axis[:, 0], -axis[:, 1])  # theta2 of pair +1 (pair -1: turned by pi)
+    pair = np.where(np.abs(wrap_angle(theta2_plus - theta2)) <= np.pi / 2, 1, -1)
+    pair[in_cone] = np.where(phi1 >= 0, 1, -1)
+    chosen = _pair_results(machine, tip, axis, lengths, pair, theta2, with_margins=True)
     joints = chosen.joints.copy()
     joints[:, 4] = theta2 + wrap_angle(joints[:, 4] - theta2)
     return chosen.with_joints(joints), axis
@@ -157,7 +161,9 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
     sequence = np.zeros(n, int) if sequence is None else np.asarray(sequence)
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
     in_cone = _pole_angle(axis) < max(cone, 1e-12)
-    plus, minus = _pairs(machine, tip, axis, lengths, np.zeros(n))
+    # Pair choice on reach, travel and rod clearance; margins only for the chosen solutions.
+    plus, minus = (_pair_results(machine, tip, axis, lengths, np.full(n, p), np.zeros(n), with_margins=False)
+                   for p in (1, -1))
     use_plus = np.ones(n, bool)
     previous: np.ndarray | None = None
     for rows, fresh in _runs(sequence, in_cone):
@@ -170,7 +176,7 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
         theta2[defined] = np.unwrap(chosen.joints[defined, 4])
         theta2 = _interpolate_cone(theta2, defined, tip, sequence)
     theta2 = _fit_rotary(machine, theta2, sequence)
-    result = chosen.with_joints(np.column_stack([chosen.joints[:, :4], theta2]))
+    result = assess(machine, chosen.with_joints(np.column_stack([chosen.joints[:, :4], theta2])), lengths)
     realised = axis.copy()
     if in_cone.any():
         rows = np.flatnonzero(in_cone)

@@ -71,29 +71,50 @@ class MotionSamples:
     lines: np.ndarray
     status: np.ndarray
     margins: Margins
+    block: np.ndarray  # the block each sample lies in
 
 
-def motion_samples(machine: Machine, joints: np.ndarray, rapid: np.ndarray, tool_length: np.ndarray,
-                   lines: np.ndarray) -> MotionSamples:
-    """Sample the joint-space line into every block: feed blocks at 1/2, rapids at k/8."""
+#: Feed blocks are short: their margins at the midpoint never fall measurably below the
+#: smaller end value (tests/test_pipeline.py checks this on the examples). Their midpoints are
+#: sampled only where an end is within this factor of a threshold; rapids always are.
+NEAR_THRESHOLD = 1.5
+
+
+def _near_threshold(machine: Machine, found: Margins) -> np.ndarray:
+    t = machine.singularity
+    with np.errstate(invalid="ignore"):
+        return ((found.serial < NEAR_THRESHOLD * t.serial_min) | (found.parallel < NEAR_THRESHOLD * t.parallel_min)
+                | (found.machine < NEAR_THRESHOLD * t.machine_min)
+                | (found.rod_clearance < NEAR_THRESHOLD * t.rod_clearance_min) | np.isnan(found.serial))
+
+
+def motion_samples(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray,
+                   lines: np.ndarray, every_feed_block: bool = False) -> MotionSamples:
+    """Poses on the joint-space line into each block: rapids at k/8, feed blocks at 1/2 (all of
+    them with ``every_feed_block``, else those with an end near a threshold)."""
+    joints = blocks.joints
     into = np.arange(1, len(joints))
-    same_tool = tool_length[into] == tool_length[into - 1]
+    near = _near_threshold(machine, blocks.margins)
+    feed = ~rapid[into] & (tool_length[into] == tool_length[into - 1])
+    if not every_feed_block:
+        feed &= near[into] | near[into - 1]
     rows, fractions = [], []
-    for chosen, grid in ((into[~rapid[into] & same_tool], np.array([0.5])), (into[rapid[into]], RAPID_SAMPLES)):
+    for chosen, grid in ((into[feed], np.array([0.5])), (into[rapid[into]], RAPID_SAMPLES)):
         rows.append(np.repeat(chosen, len(grid)))
         fractions.append(np.tile(grid, len(chosen)))
     row, f = np.concatenate(rows), np.concatenate(fractions)
     q = joints[row - 1] + f[:, None] * (joints[row] - joints[row - 1])
-    fk = forward_kinematics(machine, q, tool_length=tool_length[row])
+    guess = blocks.alpha[row - 1] + f * (blocks.alpha[row] - blocks.alpha[row - 1])
+    fk = forward_kinematics(machine, q, tool_length=tool_length[row], alpha_guess=guess)
     found = pose_margins(machine, q, fk.platform, fk.alpha, fk.reachable, tool_length[row])
-    return MotionSamples(q, lines[row], classify(machine, q, fk.reachable, found), found)
+    return MotionSamples(q, lines[row], classify(machine, q, fk.reachable, found), found, row)
 
 
 def check_program(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray, lines: np.ndarray,
                   limit: int = 10_000) -> tuple[list[Violation], MotionSamples]:
     """All violations at block ends and along the motion, sorted by line, ``limit`` at most each."""
     at_ends = pose_violations(machine, blocks.joints, blocks.status, blocks.margins, lines, limit=limit)
-    samples = motion_samples(machine, blocks.joints, rapid, tool_length, lines)
+    samples = motion_samples(machine, blocks, rapid, tool_length, lines)
     along = pose_violations(machine, samples.joints, samples.status, samples.margins, samples.lines,
                             where="on the way to this point: ", limit=limit)
     unique: dict[tuple[int, str], Violation] = {}

@@ -287,6 +287,8 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
                      help="Tool tip deviation allowed between blocks, mm."),
         click.option("--axis-tol", type=float, default=0.05, show_default=True,
                      help="Tool axis deviation allowed between blocks, degrees."),
+        click.option("--arc-tol", type=float, default=0.001, show_default=True,
+                     help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False),
                      help="Write violations and statistics as JSON."),
         click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
@@ -300,14 +302,14 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
 
 def _run_pipeline(cl_file: str, machine_path: str | None, tool_length: float | None,
                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  quiet: bool) -> tuple[Machine, Any, Any]:
+                  arc_tol: float, quiet: bool) -> tuple[Machine, Any, Any]:
     from .pipeline import PostOptions, postprocess
 
-    if tol <= 0 or axis_tol <= 0:
-        raise InputError("--tol and --axis-tol must be positive")
+    if min(tol, axis_tol, arc_tol) <= 0:
+        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     machine = load_machine(machine_path)
     options = PostOptions(work_offset=work_offset or None, tool_length=tool_length, units=units, tol=tol,
-                          axis_tol=axis_tol)
+                          axis_tol=axis_tol, arc_tol=arc_tol)
     stages = ["parse", "ik", "linearise", "checks"]
     show = not quiet and sys.stderr.isatty()
     with click.progressbar(length=len(stages), label="verne-post", file=sys.stderr if show else _Null()) as bar:
@@ -352,13 +354,13 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
 @user_errors
 def post_command(cl_file: str, output: str | None, machine_path: str | None, tool_length: float | None,
                  work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                 report_path: str | None, quiet: bool, max_messages: int) -> None:
+                 arc_tol: float, report_path: str | None, quiet: bool, max_messages: int) -> None:
     """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code."""
     from .gcode import write_program
     from .pipeline import gcode_format
 
     machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             quiet)
+                                             arc_tol, quiet)
     _finish(machine, options, result, report_path, quiet, max_messages)
     target = output or str(Path(cl_file).with_suffix(".nc"))
     write_program(result.program, gcode_format(machine), target)
@@ -369,10 +371,10 @@ def post_command(cl_file: str, output: str | None, machine_path: str | None, too
 @user_errors
 def check_command(cl_file: str, machine_path: str | None, tool_length: float | None,
                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  report_path: str | None, quiet: bool, max_messages: int) -> None:
+                  arc_tol: float, report_path: str | None, quiet: bool, max_messages: int) -> None:
     """Run every check of 'post' on PART.cls without writing a program."""
     machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             quiet)
+                                             arc_tol, quiet)
     _finish(machine, options, result, report_path, quiet, max_messages)
     if not quiet:
         click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "

@@ -19,8 +19,11 @@ from .machine import Machine
 from .poses import MachinePoses
 
 #: Fractions of a block where the deviation is measured while splitting. The error of a
-#: linear interpolation of a smooth map is close to a parabola, largest near the middle.
-SAMPLES = np.array([0.25, 0.5, 0.75])
+#: linear interpolation of a smooth map is close to a parabola, largest near the middle:
+#: every block is measured at its middle, and at its quarters too where the middle shows more
+#: than ``QUARTERS_FROM`` of the allowed deviation.
+MIDDLE, QUARTERS = np.array([0.5]), np.array([0.25, 0.75])
+QUARTERS_FROM = 0.3
 #: Splitting aims at this share of the tolerance, so that denser checks also pass.
 MARGIN = 0.8
 MAX_LEVELS = 24
@@ -79,14 +82,17 @@ class Blocks:
 
 
 def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray, tip1: np.ndarray,
-              axis0: np.ndarray, axis1: np.ndarray, lengths: np.ndarray, fractions: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+              axis0: np.ndarray, axis1: np.ndarray, lengths: np.ndarray, fractions: np.ndarray,
+              alpha: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Largest tip distance (mm) and axis angle (rad) from the CL path over the given fractions
-    of the joint-space blocks q0 -> q1 (tool lengths mm per block)."""
+    of the joint-space blocks q0 -> q1 (tool lengths mm per block; ``alpha`` the platform
+    tilts at both ends, rad, to start the FK iteration)."""
     m = len(q0)
     f = np.repeat(fractions[None, :], m, axis=0).ravel()
     rows = np.repeat(np.arange(m), len(fractions))
-    fk = forward_kinematics(machine, q0[rows] + f[:, None] * (q1[rows] - q0[rows]), tool_length=lengths[rows])
+    guess = None if alpha is None else alpha[0][rows] + f * (alpha[1][rows] - alpha[0][rows])
+    fk = forward_kinematics(machine, q0[rows] + f[:, None] * (q1[rows] - q0[rows]), tool_length=lengths[rows],
+                            alpha_guess=guess)
     tip_error = distance_to_segment(fk.tip, tip0[rows], tip1[rows])
     axis_error = angle_to_arc(fk.axis, axis0[rows], axis1[rows])
     tip_error = np.where(fk.reachable, tip_error, np.inf).reshape(m, -1).max(axis=1)
@@ -113,11 +119,18 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         if left.size == 0:
             break
         all_joints, all_tip, all_axis = (np.concatenate(x) for x in (joints, tip, axis))
+        all_alpha = np.concatenate([r.alpha for r in results])
         all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
         k = all_seg[right]
         lengths = poses.tool_length[k]
-        tip_error, axis_error = deviation(machine, all_joints[left], all_joints[right], all_tip[left],
-                                          all_tip[right], all_axis[left], all_axis[right], lengths, SAMPLES)
+        ends = (all_joints[left], all_joints[right], all_tip[left], all_tip[right], all_axis[left], all_axis[right])
+        tip_error, axis_error = deviation(machine, *ends, lengths, MIDDLE, (all_alpha[left], all_alpha[right]))
+        near = (tip_error > QUARTERS_FROM * MARGIN * tol) | (axis_error > QUARTERS_FROM * MARGIN * axis_tol)
+        if near.any():
+            more = deviation(machine, *(e[near] for e in ends), lengths[near], QUARTERS,
+                             (all_alpha[left][near], all_alpha[right][near]))
+            tip_error[near] = np.maximum(tip_error[near], more[0])
+            axis_error[near] = np.maximum(axis_error[near], more[1])
         split = (tip_error > MARGIN * tol) | (axis_error > MARGIN * axis_tol)
         if level == MAX_LEVELS:
             unresolved.append(k[split])

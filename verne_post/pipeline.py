@@ -35,6 +35,7 @@ class PostOptions:
     units: Literal["mm", "inch"] | None = None  # override the CL file's units
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
     axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
+    arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
 
 
 @dataclass
@@ -78,7 +79,7 @@ class PostResult:
             "path_length_mm": {"feed": feed_length,
                                "rapid": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[self.rapid[1:]]))},
             "estimated_time_s": float(np.sum(self.duration)),
-            "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol},
+            "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
             "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
                        "length_from": t.source} for t in self.poses.tools],
             "seconds": self.seconds,
@@ -125,7 +126,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
         clock = now
         progress(stage)
 
-    toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.tol)
+    toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol)
     lap("parse")
     poses = machine_poses(toolpath, machine, work_offset=options.work_offset, tool_length=options.tool_length)
     cone = np.radians(machine.pole.cone)

@@ -274,10 +274,13 @@ class MachineFK:
     reachable: np.ndarray  # (N,) bool
 
 
-def machine_fk_working(geom: Geometry, joints: np.ndarray) -> MachineFK:
-    """Tool tip (mm) and axis in the table frame for joints (N, 5): rho mm, theta rad."""
+def machine_fk_working(geom: Geometry, joints: np.ndarray, alpha_guess: np.ndarray | None = None) -> MachineFK:
+    """Tool tip (mm) and axis in the table frame for joints (N, 5): rho mm, theta rad.
+
+    ``alpha_guess`` (rad): optional start for the platform tilt (see module_fk_working).
+    """
     joints = np.atleast_2d(np.asarray(joints, dtype=float))
-    module = module_fk_working(geom, joints[:, :3])
+    module = module_fk_working(geom, joints[:, :3], alpha_guess)
     tip, axis = tool_pose(geom, module.platform, module.alpha, joints[:, 3], joints[:, 4])
     return MachineFK(tip, axis, module.platform, module.alpha, module.reachable)
 

@@ -115,27 +115,103 @@ class Margins:
     """Distances to the machine's singular and colliding configurations, per pose (N,)."""
 
     serial: np.ndarray  # [0, 1]: |cos| rod / guideway, worst rod
-    parallel: np.ndarray  # [0, 1]: inverse condition number of the module's direct kinematics
-    machine: np.ndarray  # [0, 1]: inverse condition number of the tool Jacobian at fixed theta2
+    parallel: np.ndarray  # (0, 1]: inverse Frobenius condition number of the module's direct kinematics
+    machine: np.ndarray  # (0, 1]: the same for the tool Jacobian at fixed theta2
     rod_clearance: np.ndarray  # mm: R1 cos(alpha) - r1, leg I rods cross at 0
+
+
+def _adjugate4(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(adjugate, determinant) of 4 x 4 matrices stored entry-first: ``a[i, j]`` is an (N,) array.
+
+    Expansion by complementary 2 x 2 minors, elementwise over N: far cheaper than a LAPACK
+    call per 4 x 4 matrix. The adjugate comes back entry-first too (4, 4, N).
+    """
+    s0 = a[0, 0] * a[1, 1] - a[1, 0] * a[0, 1]
+    s1 = a[0, 0] * a[1, 2] - a[1, 0] * a[0, 2]
+    s2 = a[0, 0] * a[1, 3] - a[1, 0] * a[0, 3]
+    s3 = a[0, 1] * a[1, 2] - a[1, 1] * a[0, 2]
+    s4 = a[0, 1] * a[1, 3] - a[1, 1] * a[0, 3]
+    s5 = a[0, 2] * a[1, 3] - a[1, 2] * a[0, 3]
+    c5 = a[2, 2] * a[3, 3] - a[3, 2] * a[2, 3]
+    c4 = a[2, 1] * a[3, 3] - a[3, 1] * a[2, 3]
+    c3 = a[2, 1] * a[3, 2] - a[3, 1] * a[2, 2]
+    c2 = a[2, 0] * a[3, 3] - a[3, 0] * a[2, 3]
+    c1 = a[2, 0] * a[3, 2] - a[3, 0] * a[2, 2]
+    c0 = a[2, 0] * a[3, 1] - a[3, 0] * a[2, 1]
+    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+    adj = np.array([
+        [a[1, 1] * c5 - a[1, 2] * c4 + a[1, 3] * c3, -a[0, 1] * c5 + a[0, 2] * c4 - a[0, 3] * c3,
+         a[3, 1] * s5 - a[3, 2] * s4 + a[3, 3] * s3, -a[2, 1] * s5 + a[2, 2] * s4 - a[2, 3] * s3],
+        [-a[1, 0] * c5 + a[1, 2] * c2 - a[1, 3] * c1, a[0, 0] * c5 - a[0, 2] * c2 + a[0, 3] * c1,
+         -a[3, 0] * s5 + a[3, 2] * s2 - a[3, 3] * s1, a[2, 0] * s5 - a[2, 2] * s2 + a[2, 3] * s1],
+        [a[1, 0] * c4 - a[1, 1] * c2 + a[1, 3] * c0, -a[0, 0] * c4 + a[0, 1] * c2 - a[0, 3] * c0,
+         a[3, 0] * s4 - a[3, 1] * s2 + a[3, 3] * s0, -a[2, 0] * s4 + a[2, 1] * s2 - a[2, 3] * s0],
+        [-a[1, 0] * c3 + a[1, 1] * c1 - a[1, 2] * c0, a[0, 0] * c3 - a[0, 1] * c1 + a[0, 2] * c0,
+         -a[3, 0] * s3 + a[3, 1] * s1 - a[3, 2] * s0, a[2, 0] * s3 - a[2, 1] * s1 + a[2, 2] * s0],
+    ])
+    return adj, det
+
+
+def _inverse_condition(matrix: np.ndarray, adj: np.ndarray, det: np.ndarray) -> np.ndarray:
+    """4 / (|M|_F |M^-1|_F) in [0, 1], entry-first (4, 4, N) matrices with adjugates and determinants.
+
+    The inverse Frobenius condition number (kappa_2 <= kappa_F <= 4 kappa_2), from one
+    adjugate instead of an SVD.
+    """
+    frobenius = np.sqrt(np.sum(matrix * matrix, axis=(0, 1)) * np.sum(adj * adj, axis=(0, 1)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.nan_to_num(4.0 * np.abs(det) / frobenius)
 
 
 def margins(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.ndarray) -> Margins:
     """All margins for N working-mode poses: joints (N, 5) mm/rad, platform (N, 3) mm, alpha rad.
 
-    machine: the Jacobian of (tip, phi1) with respect to (rho1, rho2, rho3, theta1) at fixed
-    theta2, phi1 times Delta and theta1 divided by Delta (all entries mm per mm). It loses rank
-    where two working solutions of one tool pose merge (a fold of the coupled tilt). theta2 is
-    left out on purpose: the rotary table's pole (axis along the table normal) is a singularity
-    of its own, handled by the postprocessor's pole logic.
+    serial: min |cos| between a rod and its guideway. parallel: inverse Frobenius condition
+    number of the direct-kinematics matrix A (rows by rod length, the alpha column by R1).
+    machine: the same for the Jacobian of (tip, phi1) with respect to (rho1, rho2, rho3,
+    theta1) at fixed theta2, phi1 times Delta and theta1 divided by Delta (all mm per mm). It
+    vanishes where two working solutions of one tool pose merge (a fold of the coupled tilt).
+    theta2 is left out on purpose: the rotary table's pole (axis along the table normal) is a
+    singularity of its own, handled by the postprocessor's pole logic. Rotating the tip rows
+    by theta2 changes no condition number, so (xP, lateral, z) rows stand for the tip.
     """
-    serial, parallel = singularity_measures(geom, platform, alpha, joints[:, :3])
-    full = machine_jacobian(geom, joints, platform, alpha)
-    d_alpha = module_jacobian(geom, platform, alpha, joints[:, :3])[:, 3, :]
-    jac = np.zeros((len(alpha), 4, 4))
-    jac[:, :3, :] = full[:, :3, :4]
-    jac[:, :3, 3] /= geom.delta
-    jac[:, 3, :3] = geom.delta * d_alpha
-    jac[:, 3, 3] = -1.0
-    sv = np.linalg.svd(jac, compute_uv=False)
-    return Margins(serial, parallel, sv[:, -1] / sv[:, 0], geom.R1 * np.cos(alpha) - geom.r1)
+    g = geom
+    c, s = np.cos(alpha), np.sin(alpha)
+    x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
+    rho = joints[:, :3]
+    # Rods 1a, 1b, II, III: platform point offset Y (R_pl, turned by alpha), slider y, slider, length.
+    rods = ((g.R1, g.r1, 0, g.L1, g.D1_minus_d1), (-g.R1, -g.r1, 0, g.L1, g.D1_minus_d1),
+            (-g.R2, -g.r4, 1, g.L2, g.D2_minus_d2), (g.R2, g.r4, 2, g.L3, g.D2_minus_d2))
+    a = np.empty((4, 4, len(alpha)))
+    for k, (offset, slider_y, slider, length, dx) in enumerate(rods):
+        ux = (x + dx) / length
+        uy = (y + offset * c - slider_y) / length
+        uz = (z + offset * s - rho[:, slider]) / length
+        a[k, 0], a[k, 1], a[k, 2] = ux, uy, uz
+        a[k, 3] = (-uy * offset * s + uz * offset * c) / g.R1
+    serial = np.min(np.abs(a[:, 2]), axis=0)
+    adj, det = _adjugate4(a)
+    parallel = _inverse_condition(a, adj, det)
+    # d(xP, yP, zP, alpha)/d rho = -diag(1, 1, 1, 1/R1) A^-1 B, B[k, slider] = -u_z of rod k.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d_pose = np.stack([adj[:, 0] * a[0, 2] + adj[:, 1] * a[1, 2], adj[:, 2] * a[2, 2], adj[:, 3] * a[3, 2]],
+                          axis=1) / det
+    d_pose[3] /= g.R1
+    t1 = joints[:, 3]
+    c1, s1 = np.cos(t1), np.sin(t1)
+    phi1 = alpha - t1
+    cp, sp = np.cos(phi1), np.sin(phi1)
+    d = g.delta
+    zr = z - g.da
+    jac = np.empty((4, 4, len(alpha)))
+    jac[0, :3] = d_pose[0]
+    jac[1, :3] = -c1 * d_pose[1] - s1 * d_pose[2] + d * cp * d_pose[3]
+    jac[2, :3] = s1 * d_pose[1] - c1 * d_pose[2] + d * sp * d_pose[3]
+    jac[3, :3] = d * d_pose[3]
+    jac[0, 3] = 0.0
+    jac[1, 3] = (-d * cp + s1 * y - c1 * zr) / d
+    jac[2, 3] = (c1 * y + s1 * zr - d * sp) / d
+    jac[3, 3] = -1.0
+    jac = np.nan_to_num(jac)
+    machine = np.where(parallel > 0, _inverse_condition(jac, *_adjugate4(jac)), 0.0)
+    return Margins(serial, parallel, machine, g.R1 * c - g.r1)

@@ -444,25 +444,30 @@ def _working_branch(geom: Geometry, rho: np.ndarray, alpha: np.ndarray) -> tuple
     return platform, residual
 
 
-def module_fk_working(geom: Geometry, rho: np.ndarray) -> ModuleFK:
+def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None = None) -> ModuleFK:
     """Platform position (N, 3) mm and alpha (rad) of the machine's assembly mode for rho (N, 3) mm.
 
-    Fast path: secant iterations from alpha = 0 on eq. 13 along the working branch of the
-    three-sphere intersection (:func:`_working_branch`); the working alpha is small and the
-    residual is smooth and monotone near it. Poses
-    where that does not land on a verified working-mode solution are solved by the exact
-    all-modes route (:func:`module_fk_all`), so the result never depends on the start guess.
+    Fast path: secant iterations on eq. 13 along the working branch of the three-sphere
+    intersection (:func:`_working_branch`), from alpha = 0 (the working alpha is small and the
+    residual smooth and monotone near it) or from ``alpha_guess`` (rad, e.g. the neighbours'
+    alpha along a path: then 2-3 steps suffice). Poses where that does not land on a verified
+    working-mode solution are solved by the exact all-modes route (:func:`module_fk_all`).
     """
     rho = np.atleast_2d(np.asarray(rho, dtype=float))
-    a0, a1 = np.zeros(rho.shape[0]), np.full(rho.shape[0], 0.02)
+    warm = alpha_guess is not None
+    a0 = np.nan_to_num(np.asarray(alpha_guess, dtype=float)) if warm else np.zeros(rho.shape[0])
+    a1 = a0 + (1e-4 if warm else 0.02)
     _, f0 = _working_branch(geom, rho, a0)
     platform, f1 = _working_branch(geom, rho, a1)
-    for _ in range(9):
+    for _ in range(12):
         slope = f1 - f0
-        step = np.divide(f1 * (a1 - a0), slope, out=np.zeros_like(f1), where=slope != 0)
+        step = np.clip(np.nan_to_num(np.divide(f1 * (a1 - a0), slope, out=np.zeros_like(f1), where=slope != 0)),
+                       -0.3, 0.3)
         a0, f0 = a1, f1
-        a1 = a1 - np.clip(np.nan_to_num(step), -0.3, 0.3)
+        a1 = a1 - step
         platform, f1 = _working_branch(geom, rho, a1)
+        if np.max(np.abs(step), initial=0.0) < 1e-15:
+            break
     alpha = np.angle(np.exp(1j * a1))
     good = np.all(np.isfinite(platform), axis=-1)
     good[good] = closure_ok(geom, platform[good], alpha[good], rho[good]) & is_working_mode(
