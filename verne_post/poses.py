@@ -84,6 +84,12 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
         end = changes[k + 1].index if k + 1 < len(changes) else n
         lengths[change.index:end] = length
         tools.append(ToolUse(change.tool, length, machine.geometry.spindle_nose + length, change.line, origin))
+    missing_feed = ~toolpath.rapid & ~np.isfinite(toolpath.feed)
+    missing_feed[0] = False  # the first motion is a positioning move (G0) anyway
+    if missing_feed.any():
+        k = int(np.argmax(missing_feed))
+        raise InputError("feed move without a programmed feed (FEDRAT, or a feed column in a CSV)", toolpath.source,
+                         int(toolpath.line[k]))
     boundary = toolpath.rapid.copy()
     boundary[[c.index for c in changes if c.index < n]] = True
     boundary[1:] |= toolpath.inverse_time[1:] != toolpath.inverse_time[:-1]
