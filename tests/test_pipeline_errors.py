@@ -105,7 +105,7 @@ def test_csv_poses(tmp_path: Path) -> None:
     source = tmp_path / "poses.csv"
     source.write_text("x,y,z,i,j,k,feed\n0,0,50,0,0,1,1000\n10,0,50,0.1,0,0.995,1000\n20,5,50,0,0,1,800\n")
     run_args = [sys.executable, "-m", "verne_post", str(source), "-o", str(tmp_path / "p.nc"), "--tool-length", "50"]
-    result = subprocess.run(run_args + ["--quiet"], capture_output=True, text=True, cwd=tmp_path)
+    result = subprocess.run([*run_args, "--quiet"], capture_output=True, text=True, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "G93" in (tmp_path / "p.nc").read_text()
     source.write_text("x,y,z,i,j,k\n0,0,50,0,0,1\n10,0,50,0.1,0,0.995\n")
