@@ -291,6 +291,8 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
                      help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
         click.option("--report", "report_path", type=click.Path(dir_okay=False),
                      help="Write violations and statistics as JSON."),
+        click.option("--no-timing", is_flag=True,
+                     help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
         click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
         click.option("--max-messages", type=int, default=20, show_default=True,
                      help="Violations printed before the count."),
@@ -302,15 +304,15 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
 
 def _run_pipeline(cl_file: str, machine_path: str | None, tool_length: float | None,
                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  arc_tol: float, quiet: bool) -> tuple[Machine, Any, Any]:
+                  arc_tol: float, no_timing: bool, quiet: bool) -> tuple[Machine, Any, Any]:
     from .pipeline import PostOptions, postprocess
 
     if min(tol, axis_tol, arc_tol) <= 0:
         raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     machine = load_machine(machine_path)
     options = PostOptions(work_offset=work_offset or None, tool_length=tool_length, units=units, tol=tol,
-                          axis_tol=axis_tol, arc_tol=arc_tol)
-    stages = ["parse", "ik", "linearise", "checks"]
+                          axis_tol=axis_tol, arc_tol=arc_tol, plan=not no_timing)
+    stages = ["parse", "ik", "linearise", "checks"] + ([] if no_timing else ["timing"])
     show = not quiet and sys.stderr.isatty()
     with click.progressbar(length=len(stages), label="verne-post", file=sys.stderr if show else _Null()) as bar:
         result = postprocess(cl_file, machine, options, progress=lambda stage: bar.update(1))
@@ -349,21 +351,38 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
 
 
 @main.command("post")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output G-code file (default: PART.nc).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Output file: G-code (default PART.nc), or a timed CSV when it ends in .csv.")
+@click.option("--format", "output_format", type=click.Choice(["gcode", "csv"]), default=None,
+              help="Output format (default: from the output file's suffix).")
+@click.option("--period", type=float, default=0.001, show_default=True,
+              help="Timed CSV sample period in s; 0 gives one row per block end.")
 @_post_options
 @user_errors
-def post_command(cl_file: str, output: str | None, machine_path: str | None, tool_length: float | None,
-                 work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                 arc_tol: float, report_path: str | None, quiet: bool, max_messages: int) -> None:
-    """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code."""
+def post_command(cl_file: str, output: str | None, output_format: str | None, period: float, machine_path: str | None,
+                 tool_length: float | None, work_offset: tuple[float, float, float] | None, units: str | None,
+                 tol: float, axis_tol: float, arc_tol: float, report_path: str | None, no_timing: bool, quiet: bool,
+                 max_messages: int) -> None:
+    """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code or a timed CSV."""
     from .gcode import write_program
     from .pipeline import gcode_format
+    from .trajectory import write_timed_csv
 
-    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             arc_tol, quiet)
-    _finish(machine, options, result, report_path, quiet, max_messages)
     target = output or str(Path(cl_file).with_suffix(".nc"))
-    write_program(result.program, gcode_format(machine), target)
+    as_csv = (output_format or ("csv" if target.lower().endswith(".csv") else "gcode")) == "csv"
+    if as_csv and no_timing:
+        raise InputError("a timed CSV needs the time-parametrisation: drop --no-timing")
+    if period < 0:
+        raise InputError("--period must be >= 0")
+    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
+                                             arc_tol, no_timing, quiet)
+    _finish(machine, options, result, report_path, quiet, max_messages)
+    if as_csv:
+        blocks = result.blocks
+        write_timed_csv(target, machine, result.schedule, result.poses.tool_length[blocks.pose],
+                        result.poses.line[blocks.pose], period)
+    else:
+        write_program(result.program, gcode_format(machine), target)
 
 
 @main.command("check")
@@ -371,10 +390,10 @@ def post_command(cl_file: str, output: str | None, machine_path: str | None, too
 @user_errors
 def check_command(cl_file: str, machine_path: str | None, tool_length: float | None,
                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  arc_tol: float, report_path: str | None, quiet: bool, max_messages: int) -> None:
-    """Run every check of 'post' on PART.cls without writing a program."""
+                  arc_tol: float, report_path: str | None, no_timing: bool, quiet: bool, max_messages: int) -> None:
+    """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
     machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             arc_tol, quiet)
+                                             arc_tol, no_timing, quiet)
     _finish(machine, options, result, report_path, quiet, max_messages)
     if not quiet:
         click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "

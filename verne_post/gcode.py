@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from verne_post.errors import CheckError
+from verne_post.numbers import fixed_field, scaled_int
 from verne_post.toolpath import Comment, Coolant, Event, Spindle, Stop, ToolChange
 
 __all__ = [
@@ -240,40 +241,6 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat) -> list[tuple
 # vectorised number formatting
 
 
-def _scaled(values: np.ndarray, decimals: int) -> np.ndarray:
-    """``values * 10**decimals`` rounded to int64 (caller has checked the range)."""
-    return np.rint(values * (10.0**decimals)).astype(np.int64)
-
-
-def _field(q: np.ndarray, decimals: int, prefix: bytes) -> np.ndarray:
-    """Bytes of ``prefix`` + the decimal number ``q / 10**decimals``, one row per value.
-
-    Returns an (n, W) uint8 array; unused leading positions are 0 bytes, removed when the lines
-    are packed. ``q`` is int64 (already scaled and rounded), so no ``-0`` can appear.
-    """
-    n = q.shape[0]
-    neg = q < 0
-    a = np.abs(q)
-    top = int(a.max()) if n else 0
-    nd_max = max(decimals + 1, len(str(top)))
-    pow10 = 10 ** np.arange(nd_max - 1, -1, -1, dtype=np.int64)  # most significant first
-    digits = ((a[:, None] // pow10) % 10).astype(np.uint8)
-    digits += ord("0")
-    ndig = np.maximum(np.count_nonzero(a[:, None] >= pow10, axis=1), decimals + 1)
-    digits[np.arange(nd_max) < (nd_max - ndig)[:, None]] = 0  # leading zeros
-    n_int = nd_max - decimals
-    p = len(prefix)
-    width = p + 1 + n_int + (1 + decimals if decimals else 0)
-    out = np.zeros((n, width), dtype=np.uint8)
-    out[:, :p] = np.frombuffer(prefix, dtype=np.uint8)
-    out[:, p] = np.where(neg, ord("-"), 0)
-    out[:, p + 1 : p + 1 + n_int] = digits[:, :n_int]
-    if decimals:
-        out[:, p + 1 + n_int] = ord(".")
-        out[:, p + 2 + n_int :] = digits[:, n_int:]
-    return out
-
-
 def _motion_text(
     joints_out: np.ndarray,
     rapid: np.ndarray,
@@ -289,7 +256,7 @@ def _motion_text(
     n = joints_out.shape[0]
     parts: list[np.ndarray] = []
     if block_numbers is not None:
-        parts.append(_field(block_numbers, 0, b"N"))
+        parts.append(fixed_field(block_numbers, 0, b"N"))
         parts.append(np.full((n, 1), ord(" "), dtype=np.uint8))
     code = np.empty((n, 2), dtype=np.uint8)
     code[:, 0] = ord("G")
@@ -297,10 +264,10 @@ def _motion_text(
     parts.append(code)
     decimals = (fmt.linear_decimals,) * 3 + (fmt.angular_decimals,) * 2
     for k, (letter, dec) in enumerate(zip((b" X", b" Y", b" Z", b" A", b" C"), decimals, strict=True)):
-        parts.append(_field(_scaled(joints_out[:, k], dec), dec, letter))
+        parts.append(fixed_field(scaled_int(joints_out[:, k], dec), dec, letter))
     feed = ~rapid
     if np.any(feed):
-        f_field = _field(np.where(feed, f_scaled, 0), fmt.feed_decimals, b" F")
+        f_field = fixed_field(np.where(feed, f_scaled, 0), fmt.feed_decimals, b" F")
         f_field[rapid] = 0
         parts.append(f_field)
     parts.append(np.full((n, 1), ord("\n"), dtype=np.uint8))

@@ -71,14 +71,21 @@ def angle_to_arc(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 class Blocks:
     """The program's block ends after linearisation, in order (M of them)."""
 
-    joints: np.ndarray  # (M, 5) mm, rad
     tip: np.ndarray  # (M, 3) mm, table frame: the point on the CL path this block ends at
     axis: np.ndarray  # (M, 3) axis on the CL path (realised axis in the pole cone)
     pose: np.ndarray  # (M,) index of the CL pose whose move the block belongs to
     fraction: np.ndarray  # (M,) position along that move, 1 at the CL pose
-    status: np.ndarray  # (M,) Status
-    result: IKResult  # per block: the IK result (margins, alpha, ...)
+    result: IKResult  # per block: joints (mm, rad), status, margins, alpha, ...
     unresolved: np.ndarray  # (K,) CL pose indices whose move could not be brought within tolerance
+
+    @property
+    def joints(self) -> np.ndarray:
+        return self.result.joints
+
+    def rows(self, index: np.ndarray) -> Blocks:
+        """The blocks ``index`` (in that order)."""
+        return Blocks(self.tip[index], self.axis[index], self.pose[index], self.fraction[index],
+                      self.result.rows(index), self.unresolved)
 
 
 def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray, tip1: np.ndarray,
@@ -160,6 +167,5 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
     order = np.lexsort((all_frac, all_seg))
     merged = concatenate(results).rows(order)
-    return Blocks(merged.joints, np.concatenate(tip)[order], np.concatenate(axis)[order], all_seg[order],
-                  all_frac[order], merged.status, merged,
+    return Blocks(np.concatenate(tip)[order], np.concatenate(axis)[order], all_seg[order], all_frac[order], merged,
                   np.unique(np.concatenate(unresolved)) if unresolved else np.empty(0, int))

@@ -136,6 +136,14 @@ class Pole(BaseModel):
     max_theta2_rate: PositiveFloat
 
 
+class TimingConfig(BaseModel):
+    """Time-parametrisation settings."""
+
+    model_config = _STRICT
+    rotary_feed: PositiveFloat = 3600.0  # deg/min: rotary speed of blocks where the tip stands still
+    corner_angle: Annotated[float, Field(gt=0, le=180)] = 30.0  # deg: sharper corners stop the motion
+
+
 class Tool(BaseModel):
     model_config = _STRICT
     length: Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -162,6 +170,7 @@ class Machine(BaseModel):
     tools: dict[Annotated[int, Field(ge=0)], Tool] = Field(default_factory=dict)
     work_offset: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     gcode: GcodeConfig = GcodeConfig()
+    timing: TimingConfig = TimingConfig()
     source: str = "verne.yaml"
 
     def kinematic_geometry(self, tool_length: float = 0.0) -> Geometry:

@@ -23,6 +23,8 @@ from .gcode import GcodeFormat, Program
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
+from .schedule import Schedule, SequenceError, plan_program
+from .timing import Limits
 from .toolpath import ToolChange
 
 
@@ -36,6 +38,7 @@ class PostOptions:
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
     axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
+    plan: bool = True  # time-parametrise (toppra, ruckig); False: feeds from the programmed feed only
 
 
 @dataclass
@@ -50,6 +53,7 @@ class PostResult:
     violations: list[Violation]
     warnings: list[str]
     program: Program | None
+    schedule: Schedule | None
     seconds: dict[str, float] = field(default_factory=dict)
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
@@ -113,6 +117,16 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
     return duration
 
 
+def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
+    """Programmed tip speed limit (mm/s) of the motion into each block; inverse-time moves give
+    their length over their programmed duration."""
+    speed = poses.feed[blocks.pose] / 60.0
+    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = np.where(duration > 0, length / duration, np.inf)
+    return np.where(poses.inverse_time[blocks.pose], inverse, speed)
+
+
 def postprocess(path: str | Path, machine: Machine, options: PostOptions,
                 progress: Callable[[str], None] = lambda stage: None) -> PostResult:
     """Run every stage except writing. Raises InputError for bad input; violations are returned."""
@@ -148,19 +162,29 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     violations.sort(key=lambda v: (v.line, v.kind))
     warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
     lap("checks")
+    # Blocks that move no joint (repeated CL points) take no time and are left out.
+    moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
+    blocks, rapid = blocks.rows(moving), rapid[moving]
     duration = block_durations(machine, poses, blocks, rapid)
-    program = None
-    if not violations:
-        program = _program(machine, poses, blocks, rapid, duration, options)
-    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, seconds)
+    schedule = None
+    if not violations and options.plan:
+        try:
+            schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
+                                    poses.sequence[blocks.pose], Limits.from_machine(machine),
+                                    rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
+                                    corner=np.radians(machine.timing.corner_angle))
+            duration = schedule.duration
+        except SequenceError as error:
+            violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
+                                        f"cannot plan the feed motion: {error}"))
+        lap("timing")
+    program = None if violations else _program(machine, poses, blocks, rapid, duration, options)
+    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, schedule, seconds)
 
 
 def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
              options: PostOptions) -> Program:
-    # Blocks that move no joint (repeated CL points) take no time and are left out.
-    moves = np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)]
-    index = np.flatnonzero(moves)
-    events = [replace(e, index=int(np.searchsorted(blocks.pose[index], e.index, side="left"))) for e in poses.events]
+    events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
     offset = machine.work_offset if options.work_offset is None else options.work_offset
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (
@@ -169,16 +193,15 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         f"SOURCE {Path(poses.source).name}",
         "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
-        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(index)} "
-        f"(CL POINTS {len(poses)}, INSERTED {len(blocks.joints) - len(poses)})",
-        f"ESTIMATED TIME {np.sum(duration):.1f} S (PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS)",
+        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "
+        f"(CL POINTS {len(poses)}, INSERTED {int(np.sum(blocks.fraction < 1))})",
+        f"CYCLE TIME {np.sum(duration):.1f} S ({'PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS' if options.plan else 'PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS ONLY'})",
     )
     if any(isinstance(e, ToolChange) and e.tool == 0 for e in events):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
     return Program(
-        joints=blocks.joints[index], rapid=rapid[index], duration=duration[index],
-        line=poses.line[blocks.pose][index], events=tuple(events), part_name=poses.part_name, header=header,
-        tool_lengths=tools,
+        joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=tuple(events),
+        part_name=poses.part_name, header=header, tool_lengths=tools,
     )
 
 

@@ -1,0 +1,388 @@
+"""Time laws of feed sequences (toppra + jerk filter) and rapids (ruckig), checked at 1 ms.
+
+The joint polylines come from the machine's IK of smooth Cartesian tool paths in the table
+frame; every plan is resampled at 1 ms and checked with finite differences against the joint
+limits, and the tool tip (FK of the sampled joints) against the programmed feed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import toppra.algorithm
+
+import verne_post as vp
+from verne_post.timing import (
+    FeedPlan,
+    Limits,
+    PlanningError,
+    baseline_time,
+    lower_bound_time,
+    plan_feed,
+    plan_rapid,
+)
+
+TOOL = 60.0
+DT = 1e-3
+SLACK = 1.02  # finite differences at 1 ms against the limits
+
+
+# ---------------------------------------------------------------------------------------------
+# Paths
+# ---------------------------------------------------------------------------------------------
+
+
+def _axis(tilt: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+    return np.stack([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)], axis=1)
+
+
+def _joints(machine: vp.Machine, tip: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Working-mode IK, theta2 kept continuous (hint from the previous chunk, then unwrapped)."""
+    chunks = []
+    hint = float(vp.inverse_kinematics(machine, tip[:1], axis[:1], tool_length=TOOL).joints[0, 4])
+    for part in np.array_split(np.arange(len(tip)), max(1, len(tip) // 50)):
+        ik = vp.inverse_kinematics(machine, tip[part], axis[part], theta2_hint=hint, tool_length=TOOL)
+        assert (ik.status == 0).all()
+        chunks.append(ik.joints)
+        hint = float(ik.joints[-1, 4])
+    joints = np.concatenate(chunks)
+    joints[:, 4] = np.unwrap(joints[:, 4])
+    assert np.abs(np.diff(joints[:, 3:], axis=0)).max() < 0.2  # continuous: no change of solution branch
+    return joints
+
+
+def helix(machine: vp.Machine, n: int = 1001, turns: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """A helix of radius 40 mm around the table axis, tool tilted 20..40 deg, leaning along it."""
+    a = np.linspace(0.0, 2 * np.pi * turns, n)
+    tip = np.stack([40.0 * np.cos(a), 40.0 * np.sin(a), 60.0 + 5.0 * a / (2 * np.pi)], axis=1)
+    tilt = np.radians(20.0 + 20.0 * 0.5 * (1 - np.cos(a / turns)))
+    return _joints(machine, tip, _axis(tilt, a + 0.3)), tip
+
+
+def zigzag_tip(n: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of 60 mm, 8 mm apart, joined by half circles, sampled evenly along the path (mm)."""
+    row, turn = 60.0, np.pi * 4.0
+    total = rows * row + (rows - 1) * turn
+    u = np.linspace(0.0, total, n)
+    period = row + turn
+    k = np.minimum(np.floor(u / period), rows - 1)
+    v = u - k * period
+    side = np.where(k % 2 == 0, 1.0, -1.0)  # direction of travel along x on row k
+    on_row = v <= row
+    x = np.where(on_row, side * (v - row / 2), side * (row / 2 + 4.0 * np.sin((v - row) / 4.0)))
+    y = np.where(on_row, 8.0 * k, 8.0 * k + 4.0 - 4.0 * np.cos((v - row) / 4.0))
+    return np.stack([x, y - 4.0 * (rows - 1), 70.0 + 0.05 * x], axis=1), u / total
+
+
+def zigzag(machine: vp.Machine, n: int = 800) -> tuple[np.ndarray, np.ndarray]:
+    """Four 60 mm rows joined by half circles (8 mm step), tool tilt 20..40 deg and swinging."""
+    tip, phase = zigzag_tip(n, 4)
+    tilt = np.radians(30.0 + 10.0 * np.sin(2 * np.pi * phase))
+    azimuth = np.radians(30.0) + 0.5 * np.sin(4 * np.pi * phase)
+    return _joints(machine, tip, _axis(tilt, azimuth)), tip
+
+
+@pytest.fixture(scope="module")
+def limits(machine: vp.Machine) -> Limits:
+    return Limits.from_machine(machine)
+
+
+@pytest.fixture(scope="module")
+def helix_path(machine: vp.Machine) -> tuple[np.ndarray, np.ndarray]:
+    return helix(machine)
+
+
+@pytest.fixture(scope="module")
+def zigzag_path(machine: vp.Machine) -> tuple[np.ndarray, np.ndarray]:
+    return zigzag(machine)
+
+
+# ---------------------------------------------------------------------------------------------
+# Checks
+# ---------------------------------------------------------------------------------------------
+
+
+def _uniform(total: float) -> tuple[np.ndarray, float]:
+    n = max(math.ceil(total / DT), 4) + 1
+    return np.linspace(0.0, total, n), total / (n - 1)
+
+
+def _finite_difference_ratios(q: np.ndarray, dt: float, limits: Limits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per joint, the largest |velocity|, |acceleration|, |jerk| by finite differences over its limit."""
+    vel = np.abs(np.diff(q, axis=0)).max(axis=0) / dt / limits.velocity
+    acc = np.abs(np.diff(q, 2, axis=0)).max(axis=0) / dt ** 2 / limits.acceleration
+    jerk = np.abs(np.diff(q, 3, axis=0)).max(axis=0) / dt ** 3 / limits.jerk
+    return vel, acc, jerk
+
+
+def check_feed_plan(machine: vp.Machine, plan: FeedPlan, joints: np.ndarray, tip: np.ndarray, feed: np.ndarray,
+                    limits: Limits, *, jerk: bool = True) -> dict[str, float]:
+    """Every check of a feed plan at 1 ms; returns the worst ratios found."""
+    k = len(feed)
+    assert plan.durations.shape == (k,)
+    assert np.all(plan.durations > 0)
+    assert plan.durations.sum() == pytest.approx(plan.total, rel=1e-12)
+    ends = np.concatenate([[0.0], np.cumsum(plan.durations)])
+    q_ends, qd_ends, _ = plan.sample(ends)
+    assert np.abs(q_ends - joints).max() <= 1e-9  # block ends are the waypoints
+    assert np.abs(qd_ends[[0, -1]]).max() <= 1e-9  # from rest to rest
+
+    t, dt = _uniform(plan.total)
+    q, qd, qdd = plan.sample(t)
+    assert q.shape == qd.shape == qdd.shape == (len(t), 5)
+    vel, acc, jrk = _finite_difference_ratios(q, dt, limits)
+    assert vel.max() <= SLACK
+    assert acc.max() <= SLACK
+    if jerk:
+        assert jrk.max() <= SLACK
+    # The analytic derivatives agree with the positions.
+    assert np.abs(np.diff(q, axis=0) / dt - 0.5 * (qd[1:] + qd[:-1])).max() <= 1e-3 * limits.velocity.max()
+
+    tip_t = vp.forward_kinematics(machine, q, tool_length=TOOL).tip
+    speed = np.linalg.norm(np.diff(tip_t, axis=0), axis=1) / dt
+    block = plan.block_index(0.5 * (t[1:] + t[:-1]))
+    feed_ratio = float(np.max(speed / feed[block]))
+    assert feed_ratio <= SLACK
+    return {"vel": float(vel.max()), "acc": float(acc.max()), "jerk": float(jrk.max()), "feed": feed_ratio}
+
+
+# ---------------------------------------------------------------------------------------------
+# Feed sequences
+# ---------------------------------------------------------------------------------------------
+
+
+def test_limits_from_machine_in_radians(machine: vp.Machine, limits: Limits) -> None:
+    assert limits.velocity[0] == machine.joints.rho1.velocity
+    assert limits.velocity[3] == pytest.approx(math.radians(machine.joints.theta1.velocity))
+    assert limits.jerk[4] == pytest.approx(math.radians(machine.joints.theta2.jerk))
+    with pytest.raises(ValueError):
+        Limits(np.ones(5), np.ones(5), -np.ones(5))
+
+
+def test_feed_limited_helix_takes_length_over_feed(machine: vp.Machine, limits: Limits,
+                                                   helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    feed = np.full(len(joints) - 1, 50.0)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+    worst = check_feed_plan(machine, plan, joints, tip, feed, limits)
+    assert worst["feed"] >= 0.99  # it does run at the feed
+    length = np.linalg.norm(np.diff(tip, axis=0), axis=1).sum()
+    assert length / 50.0 <= plan.total <= 1.03 * length / 50.0
+    bound = lower_bound_time(joints, tip, feed, limits)
+    assert bound == pytest.approx(length / 50.0, rel=1e-9)
+    assert bound <= plan.total
+    base = baseline_time(joints, tip, feed, limits)
+    assert bound <= base <= plan.total * 1.05
+
+
+def test_joint_limited_helix_runs_at_the_joint_limits(machine: vp.Machine, limits: Limits,
+                                                      helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    feed = np.full(len(joints) - 1, 1e5)  # far above what the joints allow
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+    worst = check_feed_plan(machine, plan, joints, tip, feed, limits)
+    assert worst["feed"] < 0.1
+    assert worst["vel"] >= 0.97  # the slowest joint reaches its velocity limit
+    bound = lower_bound_time(joints, tip, feed, limits)
+    assert bound <= plan.total <= 1.3 * bound
+
+
+def test_zigzag_with_swinging_tool_axis(machine: vp.Machine, limits: Limits,
+                                        zigzag_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = zigzag_path
+    feed = np.full(len(joints) - 1, 100.0)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+    check_feed_plan(machine, plan, joints, tip, feed, limits)
+    bound = lower_bound_time(joints, tip, feed, limits)
+    base = baseline_time(joints, tip, feed, limits)
+    assert bound <= base <= plan.total
+    assert plan.total <= 2.0 * bound  # curvature and jerk slow it down, but not without limit
+
+
+def test_feed_changes_along_the_sequence(machine: vp.Machine, limits: Limits,
+                                         helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    feed = np.full(len(joints) - 1, 80.0)
+    feed[300:500] = 20.0
+    feed[700:] = 150.0
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+    check_feed_plan(machine, plan, joints, tip, feed, limits)
+    # The slow stretch runs at about its own feed: no block there is faster than 20 mm/s.
+    length = np.linalg.norm(np.diff(tip, axis=0), axis=1)
+    assert np.all(length[300:500] / plan.durations[300:500] <= 20.0 * (1 + 1e-9))
+    assert plan.durations[350:450].sum() == pytest.approx(length[350:450].sum() / 20.0, rel=0.01)
+    assert lower_bound_time(joints, tip, feed, limits) <= plan.total
+
+
+def test_without_jerk_limit_velocity_and_acceleration_hold(machine: vp.Machine, limits: Limits,
+                                                           zigzag_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = zigzag_path
+    feed = np.full(len(joints) - 1, 100.0)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0, jerk=False)
+    check_feed_plan(machine, plan, joints, tip, feed, limits, jerk=False)
+    assert plan.filter_width == 0.0
+    assert plan.total <= plan_feed(joints, tip, feed, limits, angular_feed=1.0).total
+
+
+def test_rotary_only_blocks_use_the_angular_feed(machine: vp.Machine, limits: Limits) -> None:
+    n = 121
+    a = np.linspace(0.0, 1.0, n)
+    tip = np.tile([10.0, 5.0, 70.0], (n, 1))  # the tip stays on the part, the tool swings
+    joints = _joints(machine, tip, _axis(np.radians(25.0 + 10.0 * a), 1.5 * a))
+    feed = np.full(n - 1, 50.0)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=0.5)
+    check_feed_plan(machine, plan, joints, tip, feed, limits)
+    t, dt = _uniform(plan.total)
+    q, _, _ = plan.sample(t)
+    rotary_rate = np.linalg.norm(np.diff(q[:, 3:], axis=0), axis=1) / dt
+    assert rotary_rate.max() <= 0.5 * SLACK
+    assert rotary_rate.max() >= 0.49
+    tip_t = vp.forward_kinematics(machine, q, tool_length=TOOL).tip
+    assert np.abs(tip_t - tip[0]).max() < 1e-3
+    angle = np.linalg.norm(np.diff(joints[:, 3:], axis=0), axis=1).sum()
+    assert angle / 0.5 <= plan.total <= 1.1 * angle / 0.5
+    assert lower_bound_time(joints, tip, feed, limits, angular_feed=0.5) == pytest.approx(angle / 0.5, rel=1e-9)
+    assert baseline_time(joints, tip, feed, limits, angular_feed=0.5) <= plan.total
+
+
+def test_single_block_and_minimum_duration(machine: vp.Machine, limits: Limits,
+                                           helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    one = plan_feed(joints[:2], tip[:2], np.array([50.0]), limits, angular_feed=1.0)
+    check_feed_plan(machine, one, joints[:2], tip[:2], np.array([50.0]), limits)
+    feed = np.full(20, 1e4)
+    short = plan_feed(joints[:21], tip[:21], feed, limits, angular_feed=1.0, min_duration=0.02)
+    assert short.durations.min() >= 0.02 * (1 - 1e-9)
+    check_feed_plan(machine, short, joints[:21], tip[:21], feed, limits)
+
+
+def test_sharp_corner_is_refused_with_its_waypoint(limits: Limits) -> None:
+    joints = np.tile([600.0, 600.0, 600.0, 0.2, 0.5], (11, 1))
+    joints[:6, 0] += np.arange(6) * 1.0
+    joints[6:, 0] += 5.0
+    joints[6:, 1] += np.arange(1, 6) * 1.0  # 90 degree corner at waypoint 5
+    tip = np.cumsum(np.ones((11, 3)), axis=0)
+    with pytest.raises(PlanningError, match="waypoint 5") as info:
+        plan_feed(joints, tip, np.full(10, 50.0), limits, angular_feed=1.0)
+    assert info.value.index == 5
+    assert info.value.exit_code == 3
+
+
+def test_repeated_waypoint_is_refused(limits: Limits, helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    joints = np.insert(joints[:10], 4, joints[4], axis=0)
+    tip = np.insert(tip[:10], 4, tip[4], axis=0)
+    with pytest.raises(PlanningError, match="block 4") as info:
+        plan_feed(joints, tip, np.full(10, 50.0), limits, angular_feed=1.0)
+    assert info.value.index == 4
+
+
+def test_toppra_failure_raises_with_the_waypoint(monkeypatch: pytest.MonkeyPatch, limits: Limits,
+                                                 helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+
+    def fail(self: toppra.algorithm.TOPPRA, *args: object, **kwargs: object) -> tuple:
+        controllable = np.ones((len(self.gridpoints), 2))
+        controllable[: len(controllable) // 2] = np.nan  # backward pass broke down half way
+        return None, None, None, controllable
+
+    monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_parameterization", fail)
+    with pytest.raises(PlanningError, match=r"toppra found no feasible time law near waypoint \d+") as info:
+        plan_feed(joints[:201], tip[:201], np.full(200, 50.0), limits, angular_feed=1.0)
+    assert 80 <= info.value.index <= 120
+
+
+def test_unmet_jerk_limit_raises_instead_of_returning(limits: Limits,
+                                                      helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    """A short move needs a local slow-down round to meet the jerk limit: with none allowed it fails."""
+    joints, tip = helix_path
+    feed = np.full(5, 50.0)
+    with pytest.raises(PlanningError, match="jerk limits found near waypoint"):
+        plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0, max_refinements=0)
+    plan = plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0)
+    assert plan.refinements >= 1
+
+
+def test_bad_input_is_a_value_error(limits: Limits, helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    joints, tip = helix_path
+    feed = np.full(10, 50.0)
+    with pytest.raises(ValueError, match="feed"):
+        plan_feed(joints[:11], tip[:11], feed[:9], limits, angular_feed=1.0)
+    with pytest.raises(ValueError, match="positive"):
+        plan_feed(joints[:11], tip[:11], np.r_[feed[:9], 0.0], limits, angular_feed=1.0)
+    bad = joints[:11].copy()
+    bad[3, 2] = np.nan
+    with pytest.raises(ValueError, match="index 3"):
+        plan_feed(bad, tip[:11], feed, limits, angular_feed=1.0)
+    with pytest.raises(ValueError, match="angular_feed"):
+        plan_feed(joints[:11], tip[:11], feed, limits, angular_feed=0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Lower bound and baseline
+# ---------------------------------------------------------------------------------------------
+
+
+def test_baseline_of_a_straight_line_is_a_trapezoid(limits: Limits) -> None:
+    joints = np.tile([500.0, 600.0, 700.0, 0.1, 0.2], (2, 1))
+    joints[1, 0] += 100.0  # rho1 alone moves 100 mm, the tip 100 mm
+    tip = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]])
+    for feed, speed in ((50.0, 50.0), (5000.0, limits.velocity[0])):
+        expected = 100.0 / speed + speed / limits.acceleration[0]
+        assert baseline_time(joints, tip, np.array([feed]), limits) == pytest.approx(expected, rel=1e-12)
+        assert lower_bound_time(joints, tip, np.array([feed]), limits) == pytest.approx(100.0 / speed)
+
+
+def test_baseline_decelerates_for_a_slower_block(limits: Limits) -> None:
+    joints = np.tile([500.0, 600.0, 700.0, 0.1, 0.2], (4, 1))
+    joints[:, 0] += [0.0, 100.0, 101.0, 201.0]
+    tip = np.zeros((4, 3))
+    tip[:, 0] = joints[:, 0]
+    slow = baseline_time(joints, tip, np.array([500.0, 1.0, 500.0]), limits)
+    fast = baseline_time(joints, tip, np.array([500.0, 500.0, 500.0]), limits)
+    a = limits.acceleration[0]
+    # two 100 mm trapezoids at 500 mm/s (down to 1 mm/s, not to rest) and 1 mm at 1 mm/s
+    assert slow == pytest.approx(2 * (100.0 / 500.0 + 500.0 / a) + 1.0, rel=1e-3)
+    assert fast < slow
+
+
+# ---------------------------------------------------------------------------------------------
+# Rapids
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("delta", "scale"), [
+    ([300.0, -120.0, 40.0, 0.4, 2.5], 1.0),  # long: cruises at the velocity limit
+    ([3.0, 1.0, -2.0, 0.001, 0.01], 1.0),  # short: never reaches it
+    ([0.0, 0.0, 0.0, -0.8, 0.0], 0.5),  # one rotary joint, slower rapid limits
+])
+def test_rapid_is_jerk_limited_and_straight(limits: Limits, delta: list[float], scale: float) -> None:
+    rapid_limits = limits.scaled(scale, scale, scale)
+    start = np.array([600.0, 650.0, 700.0, 0.2, -1.0])
+    end = start + delta
+    rapid = plan_rapid(start, end, rapid_limits)
+    assert rapid.duration > 0
+    assert rapid.duration >= np.max(np.abs(end - start) / rapid_limits.velocity)
+    t, dt = _uniform(rapid.duration)
+    q, qd, qdd = rapid.sample(t)
+    vel, acc, jerk = _finite_difference_ratios(q, dt, rapid_limits)
+    assert max(vel.max(), acc.max(), jerk.max()) <= SLACK
+    assert np.abs(q[0] - start).max() <= 1e-9 and np.abs(q[-1] - end).max() <= 1e-9
+    assert np.abs(qd[[0, -1]]).max() <= 1e-9 and np.abs(qdd[[0, -1]]).max() <= 1e-9
+    # Every sample on the segment start..end, moving forward along it.
+    d = end - start
+    along = (q - start) @ d / (d @ d)
+    off = q - start - along[:, None] * d
+    assert np.abs(off).max() <= 1e-9 * max(1.0, np.abs(d).max())
+    assert along.min() >= -1e-12 and along.max() <= 1 + 1e-12
+    assert np.all(np.diff(along) >= -1e-12)
+
+
+def test_rapid_of_zero_length(limits: Limits) -> None:
+    start = np.array([600.0, 650.0, 700.0, 0.2, -1.0])
+    rapid = plan_rapid(start, start.copy(), limits)
+    assert rapid.duration == 0.0
+    q, qd, _ = rapid.sample(np.array([0.0, 1.0]))
+    assert np.all(q == start) and np.all(qd == 0.0)
