@@ -195,7 +195,7 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "
         f"(CL POINTS {len(poses)}, INSERTED {int(np.sum(blocks.fraction < 1))})",
-        f"CYCLE TIME {np.sum(duration):.1f} S ({'PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS' if options.plan else 'PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS ONLY'})",
+        f"CYCLE TIME {np.sum(duration):.1f} S ({_TIME_BASIS[options.plan]})",
     )
     if any(isinstance(e, ToolChange) and e.tool == 0 for e in events):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
@@ -203,6 +203,10 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=tuple(events),
         part_name=poses.part_name, header=header, tool_lengths=tools,
     )
+
+
+_TIME_BASIS = {True: "PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS",
+               False: "PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS ONLY"}
 
 
 def gcode_format(machine: Machine) -> GcodeFormat:
