@@ -6,6 +6,7 @@ writer. Each stage is its own module; this one wires them and keeps the statisti
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -23,7 +24,7 @@ from .gcode import GcodeFormat, Program
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
-from .schedule import Schedule, SequenceError, plan_program
+from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import ToolChange
 
@@ -39,6 +40,7 @@ class PostOptions:
     axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
     plan: bool = True  # time-parametrise (toppra, ruckig); False: feeds from the programmed feed only
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
 
 @dataclass
@@ -74,7 +76,7 @@ class PostResult:
             "ok": not self.violations,
             "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in self.violations],
             "warnings": self.warnings,
-            "points": {"cl": len(self.poses), "inserted": int(len(tips) - len(self.poses)), "blocks": len(tips),
+            "points": {"cl": len(self.poses), "inserted": int(np.sum(self.blocks.fraction < 1)), "blocks": len(tips),
                        "in_pole_cone": int(self.path.in_cone.sum())},
             "joint_ranges": ranges,
             "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
@@ -86,7 +88,26 @@ class PostResult:
             "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
             "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
                        "length_from": t.source} for t in self.poses.tools],
+            "timing": self._timing(machine),
             "seconds": self.seconds,
+        }
+
+    def _timing(self, machine: Machine) -> dict[str, Any] | None:
+        if self.schedule is None:
+            return None
+        limits = Limits.from_machine(machine)
+        tools = self.poses.tool[self.blocks.pose]
+        ratios = limit_ratios(self.schedule, limits)
+        speed = feed_speed(self.poses, self.blocks, self.duration)
+        budget = time_budget(self.schedule, self.blocks.joints, self.blocks.tip, speed, limits,
+                             np.radians(machine.timing.rotary_feed) / 60.0)
+        return {
+            "cycle_time_s": self.schedule.total,
+            "rapid_time_s": float(np.sum(self.duration[self.rapid])),
+            **budget,
+            "time_per_tool_s": {str(t): float(np.sum(self.duration[tools == t])) for t in np.unique(tools)},
+            "largest_ratio_to_limit": {name: {"velocity": float(ratios[0, j]), "acceleration": float(ratios[1, j]),
+                                              "jerk": float(ratios[2, j])} for j, name in enumerate(JOINT_NAMES)},
         }
 
 
@@ -172,7 +193,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
             schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
                                     poses.sequence[blocks.pose], Limits.from_machine(machine),
                                     rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
-                                    corner=np.radians(machine.timing.corner_angle))
+                                    corner=np.radians(machine.timing.corner_angle), workers=options.workers)
             duration = schedule.duration
         except SequenceError as error:
             violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",

@@ -9,11 +9,13 @@ jerk-limited, phase-synchronised ruckig move from rest to rest. Units: s, mm, ra
 
 from __future__ import annotations
 
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .timing import FeedPlan, Limits, PlanningError, RapidPlan, plan_feed, plan_rapid
+from .timing import FeedPlan, Limits, PlanningError, RapidPlan, lower_bound_time, plan_feed, plan_rapid
 
 
 @dataclass(frozen=True)
@@ -62,23 +64,39 @@ def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, lim
     return [(int(rows[a]), int(rows[b])) for a, b in zip(first, last, strict=True)]
 
 
+def _plan_sequence(task: tuple[np.ndarray, np.ndarray, np.ndarray, Limits, float, float]
+                   ) -> FeedPlan | tuple[str, int | None]:
+    """plan_feed for one sequence; a PlanningError comes back as (reason, waypoint) to cross processes."""
+    joints, tip, feed, limits, rotary_feed, corner = task
+    try:
+        return plan_feed(joints, tip, feed, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9)
+    except PlanningError as error:
+        return error.reason, error.index
+
+
 def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: np.ndarray, group: np.ndarray,
-                 limits: Limits, *, rotary_feed: float, corner: float) -> Schedule:
+                 limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1) -> Schedule:
     """Durations of M blocks: joints (M, 5) mm/rad, tip (M, 3) mm relative to the part, feed
     (M,) mm/s (maximum tip speed of the motion into each block), rotary_feed rad/s, corner rad.
 
-    Raises :class:`SequenceError` naming the block where a sequence cannot be planned.
+    Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
+    processes (same results). Raises :class:`SequenceError` naming the block where a sequence
+    cannot be planned.
     """
     duration = np.zeros(len(joints))
+    ranges = feed_sequences(joints, rapid, group, limits, corner)
+    tasks = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1], limits, rotary_feed, corner) for a, b in ranges]
+    if workers > 1 and len(tasks) > 8:
+        context = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            plans = list(pool.map(_plan_sequence, tasks, chunksize=max(1, len(tasks) // (4 * workers))))
+    else:
+        plans = [_plan_sequence(task) for task in tasks]
     planned: list[tuple[int, int, bool, FeedPlan | RapidPlan]] = []
-    for first, last in feed_sequences(joints, rapid, group, limits, corner):
-        rows = np.arange(first - 1, last + 1)
-        try:
-            plan = plan_feed(joints[rows], tip[rows], feed[first:last + 1], limits, angular_feed=rotary_feed,
-                             max_turn=corner + 1e-9)
-        except PlanningError as error:
-            block = first if error.index is None else first - 1 + int(error.index)
-            raise SequenceError(error.reason, block) from None
+    for (first, last), plan in zip(ranges, plans, strict=True):
+        if not isinstance(plan, FeedPlan):
+            reason, index = plan
+            raise SequenceError(reason, first if index is None else first - 1 + int(index))
         duration[first:last + 1] = plan.durations
         planned.append((first, last, False, plan))
     for m in np.flatnonzero(rapid[1:]) + 1:
@@ -88,3 +106,40 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     planned.sort(key=lambda p: p[0])
     start = np.r_[0.0, np.cumsum(duration)]
     return Schedule(duration, tuple(Segment(a, b, r, p, float(start[a])) for a, b, r, p in planned))
+
+
+def limit_ratios(schedule: Schedule, limits: Limits, period: float = 0.002) -> np.ndarray:
+    """Largest |velocity|, |acceleration|, |jerk| over their limits, (3, 5) per joint, sampled
+    every ``period`` s (jerk of rapids by differences of their acceleration)."""
+    worst = np.zeros((3, 5))
+    for segment in schedule.segments:
+        plan = segment.plan
+        t = np.linspace(0.0, plan.total, max(int(np.ceil(plan.total / period)) + 1, 2))
+        if isinstance(plan, FeedPlan):
+            _, qd, qdd, qddd = plan.sample_all(t)
+        else:
+            _, qd, qdd = plan.sample(t)
+            qddd = np.diff(qdd, axis=0) / max(t[1] - t[0], 1e-12)
+        for k, (values, limit) in enumerate(((qd, limits.velocity), (qdd, limits.acceleration),
+                                             (qddd, limits.jerk))):
+            if len(values):
+                worst[k] = np.maximum(worst[k], np.max(np.abs(values), axis=0) / limit)
+    return worst
+
+
+def time_budget(schedule: Schedule, joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits,
+                rotary_feed: float) -> dict[str, float]:
+    """Feed time split into: at the programmed feed, lost to joint velocity limits (the bound
+    of ``timing.lower_bound_time`` over the feed alone), lost to acceleration and jerk (s)."""
+    at_feed = lower = planned = 0.0
+    huge = Limits(limits.velocity * 1e9, limits.acceleration, limits.jerk)
+    for segment in schedule.segments:
+        if segment.rapid:
+            continue
+        rows = np.arange(segment.first - 1, segment.last + 1)
+        args = (joints[rows], tip[rows], feed[segment.first:segment.last + 1])
+        at_feed += lower_bound_time(*args, huge, angular_feed=rotary_feed)
+        lower += lower_bound_time(*args, limits, angular_feed=rotary_feed)
+        planned += segment.plan.total
+    return {"feed_time_s": planned, "at_programmed_feed_s": at_feed, "lost_to_joint_velocity_s": lower - at_feed,
+            "lost_to_acceleration_and_jerk_s": planned - lower}

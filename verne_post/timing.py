@@ -356,16 +356,19 @@ def lower_bound_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limi
 
 
 def baseline_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits, *,
-                  angular_feed: float | None = None) -> float:
+                  angular_feed: float | None = None, cycle: float = 0.002) -> float:
     """Time (s) a common CNC look-ahead planner would take: trapezoidal feed along the tip path.
 
     Each block's feed is clamped so that no joint exceeds its velocity limit on that block
     (the joints move proportionally along a block), its tangential acceleration is the one
-    the dominating joint allows, the speed at a block junction is at most the lower of the two
-    feeds, and a backward then a forward pass make every block reachable (decelerating ahead
-    of a slower block). Start and end at rest; no jerk limit, no curvature limit. Rotary-only
-    blocks are planned along the weighted joint displacement, capped by ``angular_feed``
-    (rad/s), and the machine stops before and after them (speeds in different units).
+    the dominating joint allows, and a backward then a forward pass make every block reachable
+    (decelerating ahead of a slower block). At a block junction the speed is at most the lower
+    of the two feeds and, as controllers limit the velocity jump of each joint at a block
+    transition, at most the speed whose joint velocity change stays within what the joint's
+    acceleration gives in one interpolation ``cycle`` (s; 2 ms is common). Start and end at
+    rest; no jerk limit, no curvature limit. Rotary-only blocks are planned along the weighted
+    joint displacement, capped by ``angular_feed`` (rad/s), and the machine stops before and
+    after them (speeds in different units).
     """
     joints, tip, feed = _as_sequence(joints, tip, feed)
     limits = _check_limits(limits)
@@ -387,6 +390,12 @@ def baseline_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits:
     junction = np.zeros(k + 1)
     same_kind = blocks.rotary_only[:-1] == blocks.rotary_only[1:]
     junction[1:-1] = np.where(same_kind, np.minimum(speed[:-1], speed[1:]), 0.0)
+    # Velocity jump at the junction: joint rates per unit of path before and after.
+    rate = adq * np.sign(blocks.dq) / np.maximum(ell, 1e-300)[:, None]
+    jump = np.abs(rate[1:] - rate[:-1])
+    with np.errstate(divide="ignore"):
+        allowed = np.min(np.where(jump > 0, limits.acceleration * cycle / jump, np.inf), axis=1)
+    junction[1:-1] = np.minimum(junction[1:-1], allowed)
     reach = 2.0 * accel * ell
     j = junction.tolist()
     r = reach.tolist()
