@@ -899,7 +899,7 @@ def test_csv_without_feed_and_inch(tmp_path: Path) -> None:
         ("x,y,z,i,j,k,x\n", 1, "appears twice"),
         ("x,y,z,i,j,k\n1,2,3,0,0\n", 2, "row has 5 fields"),
         ("x,y,z,i,j,k\n1,2,3,0,0,1\n1,2,3q,0,0,1\n", 3, "'3q' is not a number"),
-        ("x,y,z,i,j,k\n1,2,nan,0,0,1\n", 2, "NaN in pose"),
+        ("x,y,z,i,j,k\n1,2,nan,0,0,1\n", 2, "'nan' is not a finite number"),
         ("x,y,z,i,j,k\n1,2,3,0,0,0\n", 2, "tool axis has zero length"),
         ("x,y,z,i,j,k,feed\n1,2,3,0,0,1,-3\n", 2, "feed must be positive"),
         ("x,y,z,i,j,k\n", None, "no poses in file"),

@@ -93,10 +93,10 @@ def test_batch_round_trip(tmp_path: Path, machine: vp.Machine) -> None:
     ("content", "message"),
     [
         ("x,y,z,i,j,k\n1,2,3,0,0,1\n4,5,six,0,0,1\n", "poses.csv:3: 'six' is not a number (column z)"),
-        ("x,y,z,i,j,q\n1,2,3,0,0,1\n", "poses.csv:1: header must be x,y,z,i,j,k"),
+        ("x,y,z,i,j,q\n1,2,3,0,0,1\n", "poses.csv:1: unknown column 'q'"),
         ("x,y,z,i,j,k\n1,2,3,0,0,0\n", "poses.csv:2: tool axis has zero length"),
         ("x,y,z,i,j,k\n1,2,3,nan,0,1\n", "poses.csv:2: 'nan' is not a finite number"),
-        ("x,y,z,i,j,k\n1,2,3,0,1\n", "poses.csv:2: expected 6 values, got 5"),
+        ("x,y,z,i,j,k\n1,2,3,0,1\n", "poses.csv:2: row has 5 fields"),
         ("", "poses.csv: empty file"),
     ],
 )

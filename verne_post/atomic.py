@@ -11,13 +11,27 @@ from typing import TextIO
 
 
 @contextlib.contextmanager
-def atomic_write(path: str | os.PathLike[str], newline: str | None = None) -> Iterator[TextIO]:
-    """Open a temporary file beside ``path`` for text writing; rename it onto ``path`` on success."""
+def atomic_write(path: str | os.PathLike[str], newline: str | None = "\n") -> Iterator[TextIO]:
+    """Open a temporary file beside ``path`` for ASCII text; on success it replaces ``path``.
+
+    The file is flushed to disk before the rename and keeps the permissions of the file it
+    replaces (or the usual ones for a new file). On any error the temporary file is removed
+    and ``path`` is left as it was.
+    """
     target = Path(path)
-    fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent or ".")
+    fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
         with os.fdopen(fd, "w", encoding="ascii", newline=newline) as handle:
             yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        try:
+            mode = target.stat().st_mode & 0o7777
+        except FileNotFoundError:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(temporary, mode)
         os.replace(temporary, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

@@ -80,6 +80,7 @@ from typing import Any, Literal
 import numpy as np
 
 from verne_post.errors import InputError
+from verne_post.tables import read_table
 from verne_post.toolpath import Comment, Coolant, Event, Spindle, Stop, ToolChange, Toolpath
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -1292,72 +1293,26 @@ def read_pose_csv(path: str | os.PathLike[str], *, units: Literal["mm", "inch"] 
     are skipped.
     """
     src = _source(path)
-    override = _check_units_arg(units)
-    file_units: Units = override or "mm"
+    file_units: Units = _check_units_arg(units) or "mm"
     scale = MM_PER_INCH if file_units == "inch" else 1.0
-    text = _read_text(path, src)
-    lines = _split_lines(text)
-    header: dict[str, int] | None = None
-    header_line = 0
-    rows: list[list[float]] = []
-    feeds: list[float] = []
-    line_nos: list[int] = []
-    for lineno, raw in enumerate(lines, 1):
-        s = raw.strip()
-        if not s or s.startswith("#"):
-            continue
-        fields = [f.strip() for f in s.split(",")]
-        if header is None:
-            names = [f.lower() for f in fields]
-            header = {}
-            for col, name in enumerate(names):
-                if name not in (*_CSV_COLUMNS, "feed"):
-                    raise InputError(
-                        f"unknown column '{fields[col]}' (header must be x,y,z,i,j,k[,feed])",
-                        source=src,
-                        line=lineno,
-                    )
-                if name in header:
-                    raise InputError(f"column '{name}' appears twice", source=src, line=lineno)
-                header[name] = col
-            missing = [c for c in _CSV_COLUMNS if c not in header]
-            if missing:
-                raise InputError(
-                    f"header lacks column(s) {','.join(missing)} (need x,y,z,i,j,k[,feed])",
-                    source=src,
-                    line=lineno,
-                )
-            header_line = lineno
-            continue
-        if len(fields) != len(header):
-            raise InputError(
-                f"row has {len(fields)} fields, header (line {header_line}) has {len(header)}",
-                source=src,
-                line=lineno,
-            )
-        rows.append([_parse_number(fields[header[c]], "pose", src, lineno) for c in _CSV_COLUMNS])
-        if "feed" in header and fields[header["feed"]] != "":
-            f = _parse_number(fields[header["feed"]], "feed", src, lineno)
-            if f <= 0:
-                raise InputError(f"feed must be positive, got {f:g}", source=src, line=lineno)
-            feeds.append(f * scale)
-        else:
-            feeds.append(math.nan)
-        line_nos.append(lineno)
-    if not rows:
-        raise InputError("no poses in file" if header is not None else "no header in file", source=src)
-    arr = np.array(rows, dtype=float)
-    tip, axis = arr[:, :3], arr[:, 3:]
-    line = np.array(line_nos, dtype=np.int64)
+    columns, line = read_table(path, _CSV_COLUMNS, ("feed",))
+    if not len(line):
+        raise InputError("no poses in file", source=src)
+    tip = np.column_stack([columns[c] for c in "xyz"])
+    axis = np.column_stack([columns[c] for c in "ijk"])
+    feed = columns.get("feed", np.full(len(line), math.nan))
+    if np.any(feed <= 0):
+        k = int(np.argmax(feed <= 0))
+        raise InputError(f"feed must be positive, got {feed[k]:g}", source=src, line=int(line[k]))
     _validate(tip, axis, line, src, "pose")
-    n = len(rows)
+    n = len(line)
     return Toolpath(
         source=src,
-        tip=np.ascontiguousarray(tip * scale),
-        axis=np.ascontiguousarray(axis / np.linalg.norm(axis, axis=1)[:, None]),
+        tip=tip * scale,
+        axis=axis / np.linalg.norm(axis, axis=1)[:, None],
         line=line,
         rapid=np.zeros(n, dtype=bool),
-        feed=np.array(feeds, dtype=float),
+        feed=feed * scale,
         tool=np.zeros(n, dtype=np.int64),
         inverse_time=np.zeros(n, dtype=bool),
         units=file_units,

@@ -179,14 +179,10 @@ def ik_command(poses: str | None, output: str | None, tip: tuple[float, ...] | N
 
 def _ik_batch(machine: Machine, poses: str, output: str | None, tool_length: float, scale: float) -> None:
     from .branch import solve_path
+    from .cl import read_pose_csv
 
-    columns, lines = read_table(poses, ("x", "y", "z", "i", "j", "k"))
-    tip = np.column_stack([columns[c] for c in "xyz"])
-    axis = np.column_stack([columns[c] for c in "ijk"])
-    norm = np.linalg.norm(axis, axis=1)
-    if np.any(norm < 1e-9):
-        raise InputError("tool axis has zero length", poses, int(lines[np.argmax(norm < 1e-9)]))
-    result = solve_path(machine, tip, axis / norm[:, None], tool_length=tool_length).result
+    toolpath = read_pose_csv(poses)
+    result = solve_path(machine, toolpath.tip, toolpath.axis, tool_length=tool_length).result
     labels = np.array([Status(s).label for s in range(len(Status))])[result.status]
     table = {
         "rho1": result.joints[:, 0], "rho2": result.joints[:, 1], "rho3": result.joints[:, 2],

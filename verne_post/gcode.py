@@ -30,17 +30,15 @@ Output is deterministic (no dates). Checked against LinuxCNC's interpreter (``ve
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
-import tempfile
 import unicodedata
 from collections.abc import Iterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
+from verne_post.atomic import atomic_write
 from verne_post.errors import CheckError
 from verne_post.numbers import fixed_field, scaled_int
 from verne_post.toolpath import Comment, Coolant, Event, Spindle, Stop, ToolChange
@@ -444,24 +442,7 @@ def write_program(program: Program, fmt: GcodeFormat | None, path: str | os.Path
     it is complete: on any error ``path`` is left as it was (absent or the previous file) and the
     temporary file is removed. Raises like :func:`format_program`.
     """
-    target = Path(path)
     pieces = _pieces(program, fmt or GcodeFormat())  # validates before touching the disk
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="ascii", newline="\n") as fh:
-            for piece in pieces:
-                fh.write(piece)
-            fh.flush()
-            os.fsync(fh.fileno())
-        try:
-            mode = target.stat().st_mode & 0o7777
-        except FileNotFoundError:
-            umask = os.umask(0)
-            os.umask(umask)
-            mode = 0o666 & ~umask
-        os.chmod(tmp_name, mode)
-        os.replace(tmp_name, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
-        raise
+    with atomic_write(path) as handle:
+        for piece in pieces:
+            handle.write(piece)

@@ -18,9 +18,9 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: 
                ) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Columns (name -> float array) and the 1-based file line of each row.
 
-    The header must name every ``required`` column and nothing outside ``required`` and
-    ``optional`` (any order, case and surrounding spaces ignored). Every cell must be a finite
-    number. Blank lines are skipped.
+    The header names every ``required`` column and any of the ``optional`` ones, in any order;
+    case and surrounding spaces are ignored. Every cell is a finite number; an optional
+    column's cell may be empty (NaN). Blank lines and lines starting with ``#`` are skipped.
     """
     source = str(path)
     try:
@@ -28,28 +28,36 @@ def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: 
             rows = list(csv.reader(handle))
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read: {exc}", source) from None
-    numbered = [(k + 1, row) for k, row in enumerate(rows) if any(cell.strip() for cell in row)]
+    expected = ",".join(required) + "".join(f"[,{c}]" for c in optional)
+    numbered = [(k + 1, [cell.strip() for cell in row]) for k, row in enumerate(rows)
+                if any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
     if not numbered:
-        raise InputError("empty file: expected a header line " + ",".join(required), source)
+        raise InputError(f"empty file: expected a header line {expected}", source)
     header_line, header = numbered[0]
-    names = [cell.strip().lower() for cell in header]
+    names = [cell.lower() for cell in header]
+    for k, name in enumerate(names):
+        if name not in required and name not in optional:
+            raise InputError(f"unknown column '{header[k]}' (header must be {expected})", source, header_line)
+        if name in names[:k]:
+            raise InputError(f"column '{name}' appears twice", source, header_line)
     missing = [c for c in required if c not in names]
-    unknown = [c for c in names if c not in required and c not in optional]
-    if missing or unknown or len(set(names)) != len(names):
-        expected = ",".join(required) + "".join(f"[,{c}]" for c in optional)
-        raise InputError(f"header must be {expected}, got {','.join(names)}", source, header_line)
+    if missing:
+        raise InputError(f"header lacks column(s) {','.join(missing)} (need {expected})", source, header_line)
     values = np.empty((len(numbered) - 1, len(names)))
     lines = np.empty(len(numbered) - 1, dtype=np.int64)
     for r, (line, row) in enumerate(numbered[1:]):
         if len(row) != len(names):
-            raise InputError(f"expected {len(names)} values, got {len(row)}", source, line)
+            raise InputError(f"row has {len(row)} fields, header (line {header_line}) has {len(names)}", source, line)
         for c, cell in enumerate(row):
+            if cell == "" and names[c] in optional:
+                values[r, c] = math.nan
+                continue
             try:
                 value = float(cell)
             except ValueError:
-                raise InputError(f"'{cell.strip()}' is not a number (column {names[c]})", source, line) from None
+                raise InputError(f"'{cell}' is not a number (column {names[c]})", source, line) from None
             if not math.isfinite(value):
-                raise InputError(f"'{cell.strip()}' is not a finite number (column {names[c]})", source, line)
+                raise InputError(f"'{cell}' is not a finite number (column {names[c]})", source, line)
             values[r, c] = value
         lines[r] = line
     return {name: values[:, c] for c, name in enumerate(names)}, lines
