@@ -7,6 +7,7 @@ A thin layer: parse options, call the library, print. mm and degrees at this int
 from __future__ import annotations
 
 import functools
+import io
 import json
 import sys
 from collections.abc import Callable
@@ -298,32 +299,20 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
     return function
 
 
-def _run_pipeline(cl_file: str, machine_path: str | None, tool_length: float | None,
-                  work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  arc_tol: float, no_timing: bool, quiet: bool) -> tuple[Machine, Any, Any]:
+def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool,
+                  **choices: Any) -> tuple[Machine, Any, Any]:
+    """Load the machine and run every stage but writing; a progress bar on a terminal."""
     from .pipeline import PostOptions, postprocess
 
-    if min(tol, axis_tol, arc_tol) <= 0:
+    if min(choices["tol"], choices["axis_tol"], choices["arc_tol"]) <= 0:
         raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     machine = load_machine(machine_path)
-    options = PostOptions(work_offset=work_offset or None, tool_length=tool_length, units=units, tol=tol,
-                          axis_tol=axis_tol, arc_tol=arc_tol, plan=not no_timing)
-    stages = ["parse", "ik", "linearise", "checks"] + ([] if no_timing else ["timing"])
-    show = not quiet and sys.stderr.isatty()
-    with click.progressbar(length=len(stages), label="verne-post", file=sys.stderr if show else _Null()) as bar:
+    options = PostOptions(**{**choices, "work_offset": choices["work_offset"] or None}, plan=not no_timing)
+    stages = 4 if no_timing else 5
+    stream = sys.stderr if not quiet and sys.stderr.isatty() else io.StringIO()
+    with click.progressbar(length=stages, label="verne-post", file=stream) as bar:
         result = postprocess(cl_file, machine, options, progress=lambda stage: bar.update(1))
     return machine, options, result
-
-
-class _Null:
-    def write(self, text: str) -> int:
-        return len(text)
-
-    def flush(self) -> None:
-        pass
-
-    def isatty(self) -> bool:
-        return False
 
 
 def _finish(machine: Machine, options: Any, result: Any, report_path: str | None, quiet: bool,
@@ -355,10 +344,8 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
               help="Timed CSV sample period in s; 0 gives one row per block end.")
 @_post_options
 @user_errors
-def post_command(cl_file: str, output: str | None, output_format: str | None, period: float, machine_path: str | None,
-                 tool_length: float | None, work_offset: tuple[float, float, float] | None, units: str | None,
-                 tol: float, axis_tol: float, arc_tol: float, report_path: str | None, no_timing: bool, quiet: bool,
-                 max_messages: int) -> None:
+def post_command(cl_file: str, output: str | None, output_format: str | None, period: float,
+                 report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code or a timed CSV."""
     from .gcode import write_program
     from .pipeline import gcode_format
@@ -366,13 +353,12 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
 
     target = output or str(Path(cl_file).with_suffix(".nc"))
     as_csv = (output_format or ("csv" if target.lower().endswith(".csv") else "gcode")) == "csv"
-    if as_csv and no_timing:
+    if as_csv and choices["no_timing"]:
         raise InputError("a timed CSV needs the time-parametrisation: drop --no-timing")
     if period < 0:
         raise InputError("--period must be >= 0")
-    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             arc_tol, no_timing, quiet)
-    _finish(machine, options, result, report_path, quiet, max_messages)
+    machine, options, result = _run_pipeline(cl_file, **choices)
+    _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     if as_csv:
         blocks = result.blocks
         write_timed_csv(target, machine, result.schedule, result.poses.tool_length[blocks.pose],
@@ -384,13 +370,11 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
 @main.command("check")
 @_post_options
 @user_errors
-def check_command(cl_file: str, machine_path: str | None, tool_length: float | None,
-                  work_offset: tuple[float, float, float] | None, units: str | None, tol: float, axis_tol: float,
-                  arc_tol: float, report_path: str | None, no_timing: bool, quiet: bool, max_messages: int) -> None:
+def check_command(cl_file: str, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
-    machine, options, result = _run_pipeline(cl_file, machine_path, tool_length, work_offset, units, tol, axis_tol,
-                                             arc_tol, no_timing, quiet)
-    _finish(machine, options, result, report_path, quiet, max_messages)
-    if not quiet:
+    machine, options, result = _run_pipeline(cl_file, **choices)
+    _finish(machine, options, result, report_path, choices["quiet"], max_messages)
+    if not choices["quiet"]:
         click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "
-                   f"{len(result.blocks.joints) - len(result.poses)} inserted)", err=True)
+                   f"{int(np.sum(result.blocks.fraction < 1))} inserted, cycle time "
+                   f"{np.sum(result.duration):.1f} s)", err=True)

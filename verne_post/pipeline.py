@@ -121,21 +121,17 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
 
     Feed blocks take their Cartesian length over the programmed feed (inverse-time moves their
     share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
-    rotary-only block is never of zero duration. The first block and rapids: joint-limit time.
+    rotary-only block is never of zero duration. Rapids: the joint-limit time.
     """
-    lower_velocity = np.array([getattr(machine.joints, n).velocity for n in JOINT_NAMES])
-    lower_velocity[3:] = np.radians(lower_velocity[3:])
     step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
-    joint_time = np.max(step / lower_velocity, axis=1)
+    joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
     length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
     feed = poses.feed[blocks.pose]
     previous = np.r_[0.0, blocks.fraction[:-1]]
     share = np.where(blocks.pose == np.r_[-1, blocks.pose[:-1]], blocks.fraction - previous, blocks.fraction)
     with np.errstate(divide="ignore", invalid="ignore"):
         cartesian = np.where(poses.inverse_time[blocks.pose], 60.0 * share / feed, 60.0 * length / feed)
-    duration = np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
-    duration[0] = joint_time[0]
-    return duration
+    return np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
 
 
 def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
