@@ -83,18 +83,29 @@ def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> list[np.nd
 
     pi (t = infinity) is always returned as a candidate because a vanishing leading
     coefficient hides it; callers verify every candidate against the closure equations.
+    Rows of full degree are solved together (eigenvalues of stacked companion matrices);
+    the rare row whose leading coefficient vanishes goes through ``np.roots``.
     """
+    coefficients = num[:, ::-1]  # highest power first
+    scale = np.max(np.abs(coefficients), axis=1)
+    usable = (scale > 0) & np.isfinite(scale)
+    coefficients = coefficients / np.where(usable, scale, 1.0)[:, None]
+    full = usable & (np.abs(coefficients[:, 0]) > 1e-13)
+    roots: list[np.ndarray] = [np.empty(0)] * len(num)
+    degree = num.shape[1] - 1
+    rows = np.flatnonzero(full)
+    if rows.size and degree > 0:
+        companion = np.zeros((rows.size, degree, degree))
+        companion[:, 0, :] = -coefficients[rows, 1:] / coefficients[rows, :1]
+        companion[:, np.arange(1, degree), np.arange(degree - 1)] = 1.0
+        for k, values in zip(rows, np.linalg.eigvals(companion), strict=True):
+            roots[k] = values
+    for k in np.flatnonzero(usable & ~full):
+        nonzero = np.flatnonzero(np.abs(coefficients[k]) > 1e-13)
+        trimmed = coefficients[k, nonzero[0]:]
+        roots[k] = np.roots(trimmed) if trimmed.size > 1 else np.empty(0)
     result = []
-    for row in num:
-        coefficients = row[::-1]
-        scale = np.max(np.abs(coefficients))
-        if scale == 0.0 or not np.isfinite(scale):
-            result.append(np.array([np.pi]))
-            continue
-        coefficients = coefficients / scale
-        nonzero = np.flatnonzero(np.abs(coefficients) > 1e-13)
-        coefficients = coefficients[nonzero[0] :]
-        roots = np.roots(coefficients) if coefficients.size > 1 else np.empty(0)
-        real = roots[np.abs(roots.imag) <= imag_tol * (1.0 + np.abs(roots))].real
+    for values in roots:
+        real = values[np.abs(values.imag) <= imag_tol * (1.0 + np.abs(values))].real
         result.append(np.append(2.0 * np.arctan(real), np.pi))
     return result
