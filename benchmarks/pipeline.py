@@ -3,7 +3,8 @@
     python benchmarks/pipeline.py [--points 100000]
 
 Generates the 5-axis example at the given size (examples/generate_job.py), runs every stage of
-``verne-post part.cls -o part.nc`` (before time-parametrisation), and in the same run times
+``verne-post part.cls -o part.nc`` before time-parametrisation (``--no-timing``; the planner
+has its own benchmark, benchmarks/timing.py), and in the same run times
 ``rs274`` interpreting the program it wrote. Target: verne-post no slower than the interpreter.
 """
 
@@ -47,7 +48,7 @@ def main() -> None:
         source, output = Path(folder) / "job.cls", Path(folder) / "job.nc"
         source.write_text(_generator().generate(args.points))
         start = time.perf_counter()
-        result = postprocess(source, machine, PostOptions())
+        result = postprocess(source, machine, PostOptions(plan=False))  # timing: benchmarks/timing.py
         assert not result.violations, result.violations[:3]
         write_start = time.perf_counter()
         write_program(result.program, gcode_format(machine), output)
