@@ -193,10 +193,9 @@ def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
     """Working-mode IK of N tool poses: tip (N, 3) mm, axis (N, 3) unit, both in the table frame.
 
     Of the two angle pairs, the one with the better status is taken (ok, then singular, then
-    out of limits); between equals the
-    one whose theta2 is nearest ``theta2_hint`` (rad), or without a hint the one with the
-    smaller |theta1|. theta2 is returned unwrapped to within pi of the hint; on the pole
-    (axis along the table normal) theta2 = hint (0 without one).
+    out of limits); between equals the one whose theta2 is nearest ``theta2_hint`` (rad), or
+    without a hint the one with the smaller |theta1|. theta2 is returned unwrapped to within
+    pi of the hint; on the pole (axis along the table normal) theta2 = hint (0 without one).
     """
     hint = 0.0 if theta2_hint is None else theta2_hint
     plus, minus = inverse_kinematics_pairs(machine, tip, axis, tool_length=tool_length, theta2_at_pole=hint)
