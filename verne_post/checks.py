@@ -130,7 +130,8 @@ def theta2_rate_warnings(machine: Machine, joints: np.ndarray, tip: np.ndarray, 
     max_rate = np.radians(machine.pole.max_theta2_rate)
     turn = np.abs(np.diff(joints[:, 4]))
     travel = np.linalg.norm(np.diff(tip, axis=0), axis=1)
-    fast = ~rapid[1:] & (turn > max_rate * np.maximum(travel, 1e-9)) & (turn > 1e-6)
+    # A rotation with the tip standing still is a programmed reorientation, not a whip.
+    fast = ~rapid[1:] & (travel > 1e-6) & (turn > max_rate * travel) & (turn > 1e-6)
     rate = np.degrees(turn) / np.maximum(travel, 1e-9)
     worst: dict[int, float] = {}
     for k in np.flatnonzero(fast):

@@ -134,13 +134,18 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
     return np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
 
 
+#: Tip speed limit (mm/s) given to the planner where the programmed one does not apply: a
+#: rotary-only inverse-time block (no tip travel) is limited by timing.rotary_feed instead.
+NO_TIP_LIMIT = 1e9
+
+
 def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
     """Programmed tip speed limit (mm/s) of the motion into each block; inverse-time moves give
     their length over their programmed duration."""
     speed = poses.feed[blocks.pose] / 60.0
     length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = np.where(duration > 0, length / duration, np.inf)
+        inverse = np.where((duration > 0) & (length > 0), length / duration, NO_TIP_LIMIT)
     return np.where(poses.inverse_time[blocks.pose], inverse, speed)
 
 

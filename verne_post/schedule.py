@@ -52,12 +52,15 @@ def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, lim
     """(first, last) block ranges of feed sequences; ``group`` ids (tool, feed mode) split them too."""
     weighted = np.diff(joints, axis=0) / limits.velocity
     unit = weighted / np.maximum(np.linalg.norm(weighted, axis=1, keepdims=True), 1e-300)
-    turn = np.r_[0.0, 0.0, np.arccos(np.clip(np.sum(unit[1:] * unit[:-1], axis=1), -1.0, 1.0))]  # at block m
+    turn = np.zeros(len(joints))  # angle between the motion into block m and into block m - 1
+    turn[2:] = np.arccos(np.clip(np.sum(unit[1:] * unit[:-1], axis=1), -1.0, 1.0))
     feed = np.r_[False, ~rapid[1:]]
     starts = feed & ~np.r_[False, feed[:-1]]
     starts[1:] |= feed[1:] & (group[1:] != group[:-1])
     starts |= feed & (turn > corner)
     rows = np.flatnonzero(feed)
+    if rows.size == 0:
+        return []
     ids = np.cumsum(starts)[rows]
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:], len(rows)] - 1
