@@ -111,3 +111,18 @@ def test_csv_poses(tmp_path: Path) -> None:
     source.write_text("x,y,z,i,j,k\n0,0,50,0,0,1\n10,0,50,0.1,0,0.995\n")
     result = subprocess.run(run_args, capture_output=True, text=True, cwd=tmp_path)
     assert result.returncode == 2 and "poses.csv:3: feed move without a programmed feed" in result.stderr
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["."], "is a directory"),
+    (["missing.cls"], "missing.cls: file not found"),
+    (["part.cls", "--work-offset", "1", "2", "x"], "'x' is not a valid float"),
+    (["part.cls", "--frobnicate"], "No such option '--frobnicate'"),
+])
+def test_command_line_mistakes_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:
+    (tmp_path / "part.cls").write_text(HEADER + GOOD)
+    result = subprocess.run([sys.executable, "-m", "verne_post", *args], capture_output=True, text=True,
+                            cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.startswith("verne-post: error: ") and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

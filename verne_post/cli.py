@@ -43,6 +43,17 @@ class _DefaultToPost(click.Group):
             args = ["post", *args]
         return super().parse_args(ctx, args)
 
+    def main(self, *args: Any, **kwargs: Any) -> Any:
+        """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2."""
+        try:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        except click.ClickException as error:
+            click.echo(f"verne-post: error: {error.format_message()}", err=True)
+            sys.exit(error.exit_code)
+        except click.Abort:
+            click.echo("verne-post: aborted", err=True)
+            sys.exit(1)
+
 
 def user_errors(function: Callable[..., Any]) -> Callable[..., Any]:
     """Turn :class:`UserError` into a one-line message and its exit code (no traceback)."""
