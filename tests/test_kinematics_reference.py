@@ -87,3 +87,21 @@ def test_y_zero_special_case(geom: vp.Geometry) -> None:
     residual = vp.kinematics.closure_residuals(geom, np.tile([-240.0, 0.0, 1000.0], (len(sol.alpha), 1)),
                                                sol.alpha, sol.rho)
     assert np.max(np.abs(residual)) <= 1e-9 * geom.L1**2
+
+
+def test_coupling_ellipse_is_eq6(geom: vp.Geometry) -> None:
+    """Points of the ellipse (eq. 7) for a given alpha satisfy eq. 6, and the IK gives that alpha back."""
+    from tests.independent import coupling
+    from verne_post.kinematics import coupling_ellipse
+
+    rng = np.random.default_rng(31)
+    alpha = rng.uniform(-0.6, 0.6, 2000)
+    a, b = coupling_ellipse(geom, alpha)
+    angle = rng.uniform(0, 2 * np.pi, 2000)
+    platform = np.column_stack([a * np.cos(angle) - geom.D1_minus_d1, b * np.sin(angle), np.full(2000, 1500.0)])
+    assert np.max(np.abs(coupling(geom, platform, alpha))) <= 1e-9 * geom.L1**4
+    solutions = module_ik_all(geom, platform)
+    for k in range(0, 2000, 50):
+        found = solutions.alpha[solutions.pose_index == k]
+        if found.size:
+            assert np.min(np.abs(found - alpha[k])) <= 1e-6 or np.min(np.abs(found + alpha[k])) <= 1e-6

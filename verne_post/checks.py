@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .api import JOINT_NAMES, IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
+from .api import IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
 from .kinematics import Margins
 from .machine import Machine
 
@@ -142,5 +142,5 @@ def theta2_rate_warnings(machine: Machine, joints: np.ndarray, tip: np.ndarray, 
             for line, value in worst.items()]
 
 
-__all__ = ["JOINT_NAMES", "MotionSamples", "Violation", "check_program", "motion_samples", "pose_violations",
+__all__ = ["MotionSamples", "Violation", "check_program", "motion_samples", "pose_violations",
            "theta2_rate_warnings"]

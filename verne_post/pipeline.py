@@ -16,7 +16,7 @@ from typing import Any, Literal
 import numpy as np
 
 from . import __version__
-from .api import JOINT_NAMES, Status, joint_bounds
+from .api import JOINT_NAMES
 from .branch import PathIK, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
@@ -236,4 +236,4 @@ def gcode_format(machine: Machine) -> GcodeFormat:
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
-__all__ = ["PostOptions", "PostResult", "Status", "block_durations", "gcode_format", "joint_bounds", "postprocess"]
+__all__ = ["PostOptions", "PostResult", "block_durations", "feed_speed", "gcode_format", "postprocess"]
