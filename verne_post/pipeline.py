@@ -78,6 +78,8 @@ class PostResult:
             "warnings": self.warnings,
             "points": {"cl": len(self.poses), "inserted": int(np.sum(self.blocks.fraction < 1)), "blocks": len(tips),
                        "in_pole_cone": int(self.path.in_cone.sum())},
+            "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(np.max(
+                2 * np.arcsin(np.linalg.norm(self.path.axis - self.poses.axis, axis=1) / 2), initial=0.0))),
             "joint_ranges": ranges,
             "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
             "smallest_margins": {name: _nanmin(getattr(margins, name)) for name in
@@ -183,6 +185,10 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
                                                                   "cut: the table would turn half a turn mid-cut"))
     violations.sort(key=lambda v: (v.line, v.kind))
     warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
+    if solved.in_cone.any() and machine.pole.cone > options.axis_tol:
+        warnings.append(f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the "
+                        f"axis tolerance ({options.axis_tol:g} deg): near the table normal the tool axis may be off "
+                        f"by up to {machine.pole.cone:g} deg")
     lap("checks")
     # Blocks that move no joint (repeated CL points) take no time and are left out.
     moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
