@@ -6,7 +6,8 @@ For each job prints, in one run: planning time (CL points/s and blocks/s), the p
 time T, the lower bound LB = sum over blocks of length / min(F, min_j v_j / |dq_j/ds|) (no
 acceleration limit at all), the time of a look-ahead trapezoidal-feed baseline with per-block
 joint velocity clamping and no jerk limit (how common CNC controllers plan), and T / LB,
-T / baseline. Rapids are the same ruckig moves in all three and are left out.
+T / baseline; and the same plan without jerk limits (T0, the baseline's own assumptions).
+Rapids are the same ruckig moves in all three and are left out.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np  # noqa: E402
 import verne_post as vp  # noqa: E402
 from benchmarks.pipeline import _generator  # noqa: E402
 from verne_post.pipeline import PostOptions, feed_speed, postprocess  # noqa: E402
+from verne_post.schedule import plan_program  # noqa: E402
 from verne_post.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
 
@@ -51,12 +53,19 @@ def measure(points: int) -> None:
         baseline += baseline_time(*args, angular_feed=rotary)
         sequences += 1
     seconds = result.seconds["timing"]
+    without_jerk = plan_program(blocks.joints, blocks.tip, result.rapid, speed, result.poses.sequence[blocks.pose],
+                                limits, rotary_feed=rotary, corner=np.radians(machine.timing.corner_angle),
+                                workers=os.cpu_count() or 1, jerk=False)
+    planned_nj = sum(s.plan.total for s in without_jerk.segments if not s.rapid)
     print(f"\njob of {len(result.poses):,} CL points, {len(blocks.joints):,} blocks, {sequences} feed sequences")
     print(f"  planning             {seconds:8.2f} s   {len(result.poses) / seconds:10,.0f} CL points/s  "
           f"{len(blocks.joints) / seconds:10,.0f} blocks/s")
     print(f"  planned feed time T  {planned:8.1f} s")
     print(f"  lower bound LB       {bound:8.1f} s   T / LB       = {planned / bound:.3f}  (target <= 1.25)")
     print(f"  trapezoidal baseline {baseline:8.1f} s   T / baseline = {planned / baseline:.3f}  (target <= 0.90)")
+    print(f"  without jerk limits  {planned_nj:8.1f} s   T0 / LB      = {planned_nj / bound:.3f}   "
+          f"T0 / baseline = {planned_nj / baseline:.3f}  (same limits as the baseline)")
+    print(f"  LB / baseline = {bound / baseline:.3f}: no plan can be faster than this share of the baseline")
     print(f"  cycle time (with rapids) {schedule.total:.1f} s")
 
 

@@ -67,28 +67,31 @@ def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, lim
     return [(int(rows[a]), int(rows[b])) for a, b in zip(first, last, strict=True)]
 
 
-def _plan_sequence(task: tuple[np.ndarray, np.ndarray, np.ndarray, Limits, float, float]
+def _plan_sequence(task: tuple[np.ndarray, np.ndarray, np.ndarray, Limits, float, float, bool]
                    ) -> FeedPlan | tuple[str, int | None]:
     """plan_feed for one sequence; a PlanningError comes back as (reason, waypoint) to cross processes."""
-    joints, tip, feed, limits, rotary_feed, corner = task
+    joints, tip, feed, limits, rotary_feed, corner, jerk = task
     try:
-        return plan_feed(joints, tip, feed, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9)
+        return plan_feed(joints, tip, feed, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9, jerk=jerk)
     except PlanningError as error:
         return error.reason, error.index
 
 
 def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: np.ndarray, group: np.ndarray,
-                 limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1) -> Schedule:
+                 limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1, jerk: bool = True
+                 ) -> Schedule:
     """Durations of M blocks: joints (M, 5) mm/rad, tip (M, 3) mm relative to the part, feed
     (M,) mm/s (maximum tip speed of the motion into each block), rotary_feed rad/s, corner rad.
 
     Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
-    processes (same results). Raises :class:`SequenceError` naming the block where a sequence
+    processes (same results). ``jerk=False`` leaves out the jerk limits of feed moves (for
+    comparisons; rapids are always jerk-limited). Raises :class:`SequenceError` naming the block where a sequence
     cannot be planned.
     """
     duration = np.zeros(len(joints))
     ranges = feed_sequences(joints, rapid, group, limits, corner)
-    tasks = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1], limits, rotary_feed, corner) for a, b in ranges]
+    tasks = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1], limits, rotary_feed, corner, jerk)
+             for a, b in ranges]
     if workers > 1 and len(tasks) > 8:
         context = multiprocessing.get_context("fork")
         with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
