@@ -14,6 +14,7 @@ import pytest
 import toppra.algorithm
 
 import verne_post as vp
+from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
 from verne_post.timing import (
     FeedPlan,
     Limits,
@@ -24,7 +25,6 @@ from verne_post.timing import (
     plan_rapid,
 )
 
-TOOL = 60.0
 DT = 1e-3
 SLACK = 1.02  # finite differences at 1 ms against the limits
 
@@ -32,56 +32,6 @@ SLACK = 1.02  # finite differences at 1 ms against the limits
 # ---------------------------------------------------------------------------------------------
 # Paths
 # ---------------------------------------------------------------------------------------------
-
-
-def _axis(tilt: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
-    return np.stack([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)], axis=1)
-
-
-def _joints(machine: vp.Machine, tip: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """Working-mode IK, theta2 kept continuous (hint from the previous chunk, then unwrapped)."""
-    chunks = []
-    hint = float(vp.inverse_kinematics(machine, tip[:1], axis[:1], tool_length=TOOL).joints[0, 4])
-    for part in np.array_split(np.arange(len(tip)), max(1, len(tip) // 50)):
-        ik = vp.inverse_kinematics(machine, tip[part], axis[part], theta2_hint=hint, tool_length=TOOL)
-        assert (ik.status == 0).all()
-        chunks.append(ik.joints)
-        hint = float(ik.joints[-1, 4])
-    joints = np.concatenate(chunks)
-    joints[:, 4] = np.unwrap(joints[:, 4])
-    assert np.abs(np.diff(joints[:, 3:], axis=0)).max() < 0.2  # continuous: no change of solution branch
-    return joints
-
-
-def helix(machine: vp.Machine, n: int = 1001, turns: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
-    """A helix of radius 40 mm around the table axis, tool tilted 20..40 deg, leaning along it."""
-    a = np.linspace(0.0, 2 * np.pi * turns, n)
-    tip = np.stack([40.0 * np.cos(a), 40.0 * np.sin(a), 60.0 + 5.0 * a / (2 * np.pi)], axis=1)
-    tilt = np.radians(20.0 + 20.0 * 0.5 * (1 - np.cos(a / turns)))
-    return _joints(machine, tip, _axis(tilt, a + 0.3)), tip
-
-
-def zigzag_tip(n: int, rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of 60 mm, 8 mm apart, joined by half circles, sampled evenly along the path (mm)."""
-    row, turn = 60.0, np.pi * 4.0
-    total = rows * row + (rows - 1) * turn
-    u = np.linspace(0.0, total, n)
-    period = row + turn
-    k = np.minimum(np.floor(u / period), rows - 1)
-    v = u - k * period
-    side = np.where(k % 2 == 0, 1.0, -1.0)  # direction of travel along x on row k
-    on_row = v <= row
-    x = np.where(on_row, side * (v - row / 2), side * (row / 2 + 4.0 * np.sin((v - row) / 4.0)))
-    y = np.where(on_row, 8.0 * k, 8.0 * k + 4.0 - 4.0 * np.cos((v - row) / 4.0))
-    return np.stack([x, y - 4.0 * (rows - 1), 70.0 + 0.05 * x], axis=1), u / total
-
-
-def zigzag(machine: vp.Machine, n: int = 800) -> tuple[np.ndarray, np.ndarray]:
-    """Four 60 mm rows joined by half circles (8 mm step), tool tilt 20..40 deg and swinging."""
-    tip, phase = zigzag_tip(n, 4)
-    tilt = np.radians(30.0 + 10.0 * np.sin(2 * np.pi * phase))
-    azimuth = np.radians(30.0) + 0.5 * np.sin(4 * np.pi * phase)
-    return _joints(machine, tip, _axis(tilt, azimuth)), tip
 
 
 @pytest.fixture(scope="module")
@@ -230,7 +180,7 @@ def test_rotary_only_blocks_use_the_angular_feed(machine: vp.Machine, limits: Li
     n = 121
     a = np.linspace(0.0, 1.0, n)
     tip = np.tile([10.0, 5.0, 70.0], (n, 1))  # the tip stays on the part, the tool swings
-    joints = _joints(machine, tip, _axis(np.radians(25.0 + 10.0 * a), 1.5 * a))
+    joints = joints_along(machine, tip, axis_from(np.radians(25.0 + 10.0 * a), 1.5 * a))
     feed = np.full(n - 1, 50.0)
     plan = plan_feed(joints, tip, feed, limits, angular_feed=0.5)
     check_feed_plan(machine, plan, joints, tip, feed, limits)
