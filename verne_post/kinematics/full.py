@@ -18,10 +18,12 @@ import numpy as np
 
 from ..machine import Geometry
 from .module import (
+    closure_ok,
     is_working_mode,
     module_fk_all,
     module_fk_working,
     solutions_for_alpha,
+    working_sliders,
 )
 from .trigpoly import TrigPoly, real_half_angle_roots
 
@@ -142,10 +144,10 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
             df = dy * gq + y * (0.5 * two_rr * s / gq) + g.R1 * (c * h - s * 0.5 * two_rr * s / h)
             alpha = alpha - np.clip(f / df, -0.2, 0.2)
     platform = _platform_pose(geom, xp, a, b, alpha)
-    rho = _working_sliders(geom, platform, alpha)
+    rho = working_sliders(geom, platform, alpha)
     good = np.all(np.isfinite(rho), axis=-1) & (np.abs(alpha) < g.alpha_max)
     good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
-    good[good] = _closes(geom, platform[good], alpha[good], rho[good])
+    good[good] = closure_ok(geom, platform[good], alpha[good], rho[good])
     joints = np.column_stack([rho, alpha - phi1, -phi2])
     retry = np.flatnonzero(~good & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
     if retry.size:
@@ -161,26 +163,6 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     alpha = np.where(good, alpha, np.nan)
     platform = _platform_pose(geom, xp, a, b, alpha)
     return MachineIK(joints, alpha, np.column_stack([phi1, phi2]), platform, good)
-
-
-def _working_sliders(geom: Geometry, platform: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """Eq. 10-12 with s_i = -1 (mm); NaN where a radicand is negative."""
-    g = geom
-    x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
-    c, s = np.cos(alpha), np.sin(alpha)
-    x2 = x + g.D2_minus_d2
-    with np.errstate(invalid="ignore"):
-        return np.stack([
-            z - np.sqrt(g.L1**2 - (g.R1**2 + g.r1**2 - 2 * g.R1 * g.r1 * c) - (x + g.D1_minus_d1) ** 2 - y**2),
-            z - g.R2 * s - np.sqrt(g.L2**2 - x2**2 - (y - g.R2 * c + g.r4) ** 2),
-            z + g.R2 * s - np.sqrt(g.L3**2 - x2**2 - (y + g.R2 * c - g.r4) ** 2),
-        ], axis=-1)
-
-
-def _closes(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
-    from .module import closure_ok
-
-    return closure_ok(geom, platform, alpha, rho)
 
 
 @dataclass(frozen=True)

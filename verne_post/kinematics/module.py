@@ -136,6 +136,13 @@ def _slider_terms(geom: Geometry, platform: np.ndarray, c: np.ndarray, s: np.nda
     return z, z - g.R2 * s, z + g.R2 * s, rad1, rad2, rad3
 
 
+def working_sliders(geom: Geometry, platform: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+    """Eq. 10-12 with s_i = -1: slider positions (N, 3) mm; NaN where a leg cannot reach."""
+    z1, z2, z3, rad1, rad2, rad3 = _slider_terms(geom, platform, np.cos(alpha), np.sin(alpha))
+    with np.errstate(invalid="ignore"):
+        return np.stack([z1 - np.sqrt(rad1), z2 - np.sqrt(rad2), z3 - np.sqrt(rad3)], axis=-1)
+
+
 @dataclass(frozen=True)
 class ModuleIK:
     """Working-mode IK of the parallel module for N platform positions (NaN where unreachable)."""
@@ -164,13 +171,8 @@ def module_ik_working(geom: Geometry, platform: np.ndarray) -> ModuleIK:
     w = _newton_cubic(q, 2.0 * q[0] / (np.sqrt(discriminant) - q[1]), 8)
     magnitude = _alpha_from_w(w, 1.0)
     alpha = np.where(y > 0, -magnitude, magnitude)
-    c, s = np.cos(alpha), np.sin(alpha)
-    z1, z2, z3, rad1, rad2, rad3 = _slider_terms(geom, platform, c, s)
-    with np.errstate(invalid="ignore"):
-        rho = np.stack([z1 - np.sqrt(rad1), z2 - np.sqrt(rad2), z3 - np.sqrt(rad3)], axis=-1)
-    reachable = (
-        (w >= 0) & (geom.R1 * c > geom.r1) & (rad1 >= 0) & (rad2 >= 0) & (rad3 >= 0) & np.isfinite(w)
-    )
+    rho = working_sliders(geom, platform, alpha)
+    reachable = (w >= 0) & (geom.R1 * np.cos(alpha) > geom.r1) & np.all(np.isfinite(rho), axis=-1) & np.isfinite(w)
     reachable &= closure_ok(geom, platform, alpha, np.where(reachable[:, None], rho, 0.0))
     return ModuleIK(np.where(reachable[:, None], rho, np.nan), np.where(reachable, alpha, np.nan), reachable)
 
