@@ -160,7 +160,8 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
     n = len(tip)
     sequence = np.zeros(n, int) if sequence is None else np.asarray(sequence)
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
-    in_cone = _pole_angle(axis) < max(cone, 1e-12)
+    cone = max(cone, 1e-12)  # an axis exactly along the table normal is always on the pole
+    in_cone = _pole_angle(axis) < cone
     # Pair choice on reach, travel and rod clearance; margins only for the chosen solutions.
     plus, minus = (_pair_results(machine, tip, axis, lengths, np.full(n, p), np.zeros(n), with_margins=False)
                    for p in (1, -1))
@@ -191,11 +192,13 @@ def _interpolate_cone(theta2: np.ndarray, defined: np.ndarray, tip: np.ndarray, 
     """theta2 at the undefined poses: linear in tip distance between the defined neighbours of
     the same sequence, else held from the nearest defined pose."""
     n = len(theta2)
+    is_defined = np.zeros(n, bool)
+    is_defined[defined] = True
     distance = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(tip, axis=0), axis=1))]
-    before = np.maximum.accumulate(np.where(np.isin(np.arange(n), defined), np.arange(n), -1))
-    after = np.minimum.accumulate(np.where(np.isin(np.arange(n), defined), np.arange(n), n)[::-1])[::-1]
+    before = np.maximum.accumulate(np.where(is_defined, np.arange(n), -1))
+    after = np.minimum.accumulate(np.where(is_defined, np.arange(n), n)[::-1])[::-1]
     out = theta2.copy()
-    for k in np.flatnonzero(~np.isin(np.arange(n), defined)):
+    for k in np.flatnonzero(~is_defined):
         b, a = before[k], after[k]
         b_ok = b >= 0 and sequence[b] == sequence[k]
         a_ok = a < n and sequence[a] == sequence[k]

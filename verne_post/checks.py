@@ -111,7 +111,7 @@ def motion_samples(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_l
 
 
 def check_program(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray, lines: np.ndarray,
-                  limit: int = 10_000) -> tuple[list[Violation], MotionSamples]:
+                  limit: int = 10_000) -> list[Violation]:
     """All violations at block ends and along the motion, sorted by line, ``limit`` at most each."""
     at_ends = pose_violations(machine, blocks.joints, blocks.status, blocks.margins, lines, limit=limit)
     samples = motion_samples(machine, blocks, rapid, tool_length, lines)
@@ -120,7 +120,7 @@ def check_program(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_le
     unique: dict[tuple[int, str], Violation] = {}
     for violation in at_ends + along:  # one message per CL line and kind: inserted points repeat it
         unique.setdefault((violation.line, violation.kind), violation)
-    return sorted(unique.values(), key=lambda v: (v.line, v.kind)), samples
+    return sorted(unique.values(), key=lambda v: (v.line, v.kind))
 
 
 def theta2_rate_warnings(machine: Machine, joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray,

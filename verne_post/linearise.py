@@ -113,7 +113,7 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     ``axis_tol`` (rad) of the CL path. Rapids and moves across a tool change are left alone."""
     n = len(poses)
     result = path.result
-    joints, tip, axis = [result.joints], [poses.tip], [path.axis]
+    tip, axis = [poses.tip], [path.axis]
     seg, frac = [np.arange(n)], [np.ones(n)]
     results = [result]
     reached = result.status != Status.UNREACHABLE
@@ -125,7 +125,8 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     for level in range(MAX_LEVELS + 1):
         if left.size == 0:
             break
-        all_joints, all_tip, all_axis = (np.concatenate(x) for x in (joints, tip, axis))
+        all_tip, all_axis = np.concatenate(tip), np.concatenate(axis)
+        all_joints = np.concatenate([r.joints for r in results])
         all_alpha = np.concatenate([r.alpha for r in results])
         all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
         k = all_seg[right]
@@ -156,7 +157,6 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         unresolved.append(k[bad])
         new = np.arange(size, size + len(u))
         size += len(u)
-        joints.append(mid.joints)
         tip.append(mid_tip)
         axis.append(realised)
         seg.append(k)

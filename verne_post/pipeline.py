@@ -172,10 +172,10 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     lap("ik")
     blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
     lap("linearise")
-    rapid = poses.rapid[blocks.pose] & (blocks.fraction == 1.0)
+    rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
     lines = poses.line[blocks.pose]
-    violations, _ = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], lines)
+    violations = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], lines)
     source = poses.source
     for k in blocks.unresolved:
         violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
