@@ -10,8 +10,9 @@ along the table normal, so the job runs with the VERNE's default work offset X0 
 Operations (in this order):
 
 1. ``RIM_CONTOUR_3AX`` - tool 2, D16 R0.8 end mill, gauge length 60 mm: 3-axis contour of the
-   rim at 7 Z levels with ``CIRCLE`` arcs (tangential lead-in/out arcs counter-clockwise about +Z,
-   the climb-milled rim clockwise, i.e. written with the circle axis 0,0,-1).
+   rim at 7 Z levels with ``CIRCLE`` arcs (tangential lead-in/out arcs counter-clockwise seen from
+   +Z, the climb-milled rim clockwise). As NX writes them, the circle axis is the one about which
+   the motion is clockwise: 0,0,-1 for the lead arcs, 0,0,1 for the rim.
 2. ``BLADE_FLANK_5AX`` - tool 4, D8 ball, 100 mm: flank (swarf) milling of both sides of every
    twisted, leaning blade in zig-zag depth levels; the tool axis follows the blade rulings,
    tilt 6..58 degrees from +Z, its azimuth sweeping all around the part.
@@ -142,9 +143,14 @@ class _ClWriter:
 
     def circle(self, centre: tuple[float, float, float], normal: tuple[float, float, float], radius: float,
                end: tuple[float, float, float], tool: tuple[float, float]) -> None:
-        """Arc from the current point to ``end``, counter-clockwise about ``normal`` (APT convention)."""
+        """Arc from the current point to ``end``, counter-clockwise about ``normal``.
+
+        Written as Siemens NX writes CIRCLE records (CLSF Manager documentation: "i,j,k is the
+        circle or helix axis vector in the MCS (assuming a clockwise direction)"): the recorded
+        axis is the one the motion runs clockwise about, -normal.
+        """
         xc, yc, zc = centre
-        i, j, k = normal
+        i, j, k = (0.0 - v for v in normal)
         dia, corner = tool
         self.record(f"CIRCLE/{xc:.4f},{yc:.4f},{zc:.4f},{i:.7f},{j:.7f},{k:.7f},{radius:.4f},0.0100,0.5000,"
                     f"{dia:.4f},{corner:.4f}")

@@ -79,13 +79,15 @@ def test_real_sample_poses(path: Path) -> None:
     assert tp.line.tolist() == goto_lines
     text_lines = path.read_text().splitlines()
     assert all(text_lines[k - 1].startswith("GOTO") for k in tp.line)
-    # inch -> mm, MSYS origin applied; tool axis carried over by 3-number GOTOs
-    origin = msys_origin(path)
+    # inch -> mm; the GOTO data are in NX's MCS (NX CLSF Manager documentation), which MSYS only
+    # locates in NX's absolute frame: the numbers are taken as they are. The tool axis is
+    # carried over by 3-number GOTOs.
+    assert np.any(msys_origin(path) != 0) or path == SWARF
     axis = np.array([0.0, 0.0, 1.0])
     for k, v in enumerate(vals):
         if len(v) == 6:
             axis = np.array(v[3:]) / np.linalg.norm(v[3:])
-        np.testing.assert_allclose(tp.tip[k], (np.array(v[:3]) + origin) * 25.4, atol=1e-9)
+        np.testing.assert_allclose(tp.tip[k], np.array(v[:3]) * 25.4, atol=1e-9)
         np.testing.assert_allclose(tp.axis[k], axis, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(tp.axis, axis=1), 1.0, atol=1e-12)
     # two RAPID records before the first two GOTOs, then FEDRAT/IPM,10 = 254 mm/min
@@ -143,24 +145,22 @@ def test_fixture_multi_operation_file() -> None:
     assert tp.part_name == "VERNE BRACKET REV B"
     assert tp.units == "mm"
     text_lines = path.read_text().splitlines()
-    # FROM is the first pose, a rapid, before MSYS (identity frame)
-    np.testing.assert_allclose(tp.tip[0], [0, 0, 250])
-    assert tp.rapid[0] and tp.line[0] == 10
-    # MSYS origin (100, 50, 0) applied afterwards
-    np.testing.assert_allclose(tp.tip[1], [60, 50, 20])
+    # FROM before any tool load only sets the start (GOHOME's target); the data are in the MCS
+    # (MSYS only says where the MCS sits in NX's absolute frame): the numbers are kept
+    assert tp.rapid[0] and tp.line[0] == 20
+    np.testing.assert_allclose(tp.tip[0], [-40, 0, 20])
     changes = events(tp, ToolChange)
     assert [(c.tool, c.length, c.diameter, c.adjust) for c in changes] == [(3, 90, 16, 3), (7, 120, 8, 7)]
     assert [c.line for c in changes] == [16, 32]
     # tool array follows the loads
-    assert tp.tool[0] == 0
-    assert (tp.tool[1 : changes[1].index] == 3).all()
+    assert (tp.tool[: changes[1].index] == 3).all()
     assert (tp.tool[changes[1].index :] == 7).all()
     # every pose line starts with a motion record
     assert all(text_lines[k - 1].split("/")[0] in ("GOTO", "FROM", "GOHOME") for k in tp.line)
     # the drilling cycle: 2 holes x 3 poses at lines 37 and 38
     assert (tp.line == 37).sum() == 3 and (tp.line == 38).sum() == 3
     hole = tp.tip[tp.line == 37]
-    np.testing.assert_allclose(hole, [[100, 50, 8], [100, 50, -7], [100, 50, 8]])
+    np.testing.assert_allclose(hole, [[0, 0, 8], [0, 0, -7], [0, 0, 8]])
     # GOHOME: rapid back to the FROM pose (part frame)
     np.testing.assert_allclose(tp.tip[-1], [0, 0, 250])
     assert tp.rapid[-1]
@@ -333,7 +333,7 @@ def rot_z(deg: float) -> np.ndarray:
 
 def test_msys_rotated_frame(tmp_path: Path) -> None:
     # CL frame: origin (10, 20, 30), X = part +Y, Y = part -X (90 deg about Z)
-    tp = cl(tmp_path, MM + "MSYS/10,20,30,0,1,0,-1,0,0\nGOTO/1,2,3,1,0,0\nGOTO/0,0,0\n")
+    tp = cl(tmp_path, MM + "MSYS/10,20,30,0,1,0,-1,0,0\nGOTO/1,2,3,1,0,0\nGOTO/0,0,0\n", frame="apply")
     np.testing.assert_allclose(tp.tip[0], [10 - 2, 20 + 1, 30 + 3])
     np.testing.assert_allclose(tp.axis[0], [0, 1, 0], atol=1e-15)
     np.testing.assert_allclose(tp.tip[1], [10, 20, 30])
@@ -342,21 +342,25 @@ def test_msys_rotated_frame(tmp_path: Path) -> None:
 
 def test_msys_tilted_frame_with_rounded_axes(tmp_path: Path) -> None:
     # X tilted 30 deg about Y, written with 7 decimals as NX does: orthonormalised
-    tp = cl(tmp_path, MM + "MSYS/0,0,0,0.8660254,0.0000000,-0.5000000,0.0000000,1.0000000,0.0000000\nGOTO/0,0,0\n")
+    tp = cl(tmp_path, MM + "MSYS/0,0,0,0.8660254,0.0000000,-0.5000000,0.0000000,1.0000000,0.0000000\nGOTO/0,0,0\n",
+            frame="apply")
     np.testing.assert_allclose(tp.axis[0], [0.5, 0, 0.8660254], atol=1e-7)
 
 
 def test_msys_inch_origin_and_reset(tmp_path: Path) -> None:
     text = "UNITS/INCHES\nFEDRAT/10\nMSYS/1,0,0,1,0,0,0,1,0\nGOTO/1,0,0\nMSYS/0,0,0,1,0,0,0,1,0\nGOTO/1,0,0\n"
+    np.testing.assert_allclose(cl(tmp_path, text, frame="apply").tip[:, 0], [50.8, 25.4])
+    # NX reading: each GOTO in its own MCS; the second MCS brought into the first one's frame
     tp = cl(tmp_path, text)
-    np.testing.assert_allclose(tp.tip[:, 0], [50.8, 25.4])
+    np.testing.assert_allclose(tp.tip[:, 0], [25.4, 0.0])
+    assert any("2 different machine coordinate systems" in w for w in tp.warnings)
 
 
 def test_csys_matrix(tmp_path: Path) -> None:
     R = rot_z(90.0)
     t = [5.0, 6.0, 7.0]
     m = np.column_stack([R, t]).ravel()
-    tp = cl(tmp_path, MM + "CSYS/" + ",".join(f"{v:.10f}" for v in m) + "\nGOTO/1,0,0,1,0,0\n")
+    tp = cl(tmp_path, MM + "CSYS/" + ",".join(f"{v:.10f}" for v in m) + "\nGOTO/1,0,0,1,0,0\n", frame="apply")
     np.testing.assert_allclose(tp.tip[0], [5, 7, 7], atol=1e-9)
     np.testing.assert_allclose(tp.axis[0], [0, 1, 0], atol=1e-9)
 
@@ -396,10 +400,17 @@ def test_msys_property_random_frames(tmp_path: Path) -> None:
         lines.append("GOTO/" + ",".join(repr(float(v)) for v in (*p, *a)))
         expected_tip.append(o + R @ p)
         expected_axis.append(R @ a)
-    tp = cl(tmp_path, "\n".join(lines) + "\n")
+    tp = cl(tmp_path, "\n".join(lines) + "\n", frame="apply")
     assert len(tp) == n
     np.testing.assert_allclose(tp.tip, expected_tip, atol=1e-9)
     np.testing.assert_allclose(tp.axis, expected_axis, atol=1e-12)
+    # the MCS reading: every pose brought into the first frame, R0^T (o + R p - o0)
+    local = cl(tmp_path, "\n".join(lines) + "\n")
+    R0 = np.array([[float(v) for v in lines[2][5:].split(",")][3:6], [float(v) for v in lines[2][5:].split(",")][6:9]])
+    o0 = np.array([float(v) for v in lines[2][5:].split(",")][:3])
+    R0 = np.column_stack([R0[0], R0[1], np.cross(R0[0], R0[1])])
+    np.testing.assert_allclose(local.tip, (np.array(expected_tip) - o0) @ R0, atol=1e-8)
+    np.testing.assert_allclose(local.axis, np.array(expected_axis) @ R0, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- tools
@@ -601,7 +612,7 @@ def test_circle_axis_slerp(tmp_path: Path) -> None:
         (MM + "GOTO/12,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0\n", 4, "arc start point"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,11,0\n", 5, "arc end point"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,0,10\nGOTO/0,10,0\n", 4, "circle axis has zero length"),
-        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1\nGOTO/0,10,0\n", 4, "CIRCLE needs 7 to 11 numbers"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0\nGOTO/0,10,0\n", 4, "CIRCLE needs 6 to 11 numbers"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\n", 4, "not followed by the GOTO"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOHOME\n", 5, "must be followed by a GOTO"),
         (MM + "CIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0\n", 3, "no current position"),
@@ -616,12 +627,20 @@ def test_bad_circles(tmp_path: Path, text: str, line: int, message: str) -> None
 
 
 def test_from_first_pose_rapid_and_gohome(tmp_path: Path) -> None:
-    text = "UNITS/MM\nFROM/0,0,200\nFEDRAT/MMPM,100\nGOTO/10,0,0,1,0,0\nGOHOME\n"
+    text = "UNITS/MM\nLOADTL/1\nFROM/0,0,200\nFEDRAT/MMPM,100\nGOTO/10,0,0,1,0,0\nGOHOME\n"
     tp = cl(tmp_path, text)
     np.testing.assert_allclose(tp.tip, [[0, 0, 200], [10, 0, 0], [0, 0, 200]])
     np.testing.assert_allclose(tp.axis[2], [0, 0, 1])
     assert tp.rapid.tolist() == [True, False, True]
-    assert tp.line.tolist() == [2, 4, 5]
+    assert tp.line.tolist() == [3, 5, 6]
+
+
+def test_from_before_any_tool_load_only_sets_the_start(tmp_path: Path) -> None:
+    # Makino FF CAM writes FROM before the first tool load: no tool length could place that pose.
+    text = "UNITS/MM\nFROM/0,0,200\nLOADTL/1\nFEDRAT/MMPM,100\nGOTO/10,0,0\nGOHOME\n"
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[10, 0, 0], [0, 0, 200]])
+    assert tp.line.tolist() == [5, 6]
 
 
 def test_gohome_without_from(tmp_path: Path) -> None:
@@ -669,7 +688,7 @@ def test_unknown_record_warning(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("record", "message"),
-    [("ORIGIN/1,2,3", "ORIGIN"), ("GOFWD/S1", "GOFWD"), ("CUTCOM/LEFT", "cutter radius compensation")],
+    [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("CALSUB/1", "subroutines")],
 )
 def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
     e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")
@@ -722,7 +741,7 @@ def test_nx_information_listing_header_and_trailer(tmp_path: Path) -> None:
     assert tp.warnings == () and tp.line.tolist() == [9]
     # the header patterns are only skipped before the first record
     tp = cl(tmp_path, MM + "GOTO/0,0,0\nNode name : pc-123\n")
-    assert any("unknown record 'Node name : pc-123'" in w for w in tp.warnings)
+    assert any("unknown record 'NODE NAME : PC-123'" in w for w in tp.warnings)
 
 
 # --------------------------------------------------------------------------- CYCLE

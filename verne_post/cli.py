@@ -282,6 +282,21 @@ def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: floa
 # ----------------------------------------------------------------------------- post / check
 
 
+_reader_options = [
+    click.option("--arc-direction", type=click.Choice(["cw", "ccw"]), default=None,
+                 help="Direction of CIRCLE arcs about their axis (default: the CAM dialect's, e.g. NX cw)."),
+    click.option("--frame", type=click.Choice(["local", "world", "apply"]), default=None,
+                 help="What MSYS/CSYS mean (default: the CAM dialect's): data in that frame (local), already "
+                      "in one frame (world), or to be mapped by it (apply)."),
+]
+
+
+def _reader_option_group(function: Callable[..., Any]) -> Callable[..., Any]:
+    for option in reversed(_reader_options):
+        function = option(function)
+    return function
+
+
 def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
     options = [
         click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False)),
@@ -297,6 +312,7 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
                      help="Tool axis deviation allowed between blocks, degrees."),
         click.option("--arc-tol", type=float, default=0.001, show_default=True,
                      help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
+        *_reader_options,
         click.option("--report", "report_path", type=click.Path(dir_okay=False),
                      help="Write violations and statistics as JSON."),
         click.option("--no-timing", is_flag=True,
@@ -389,3 +405,40 @@ def check_command(cl_file: str, report_path: str | None, max_messages: int, **ch
         click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "
                    f"{int(np.sum(result.blocks.fraction < 1))} inserted, cycle time "
                    f"{np.sum(result.duration):.1f} s)", err=True)
+
+
+@main.command("toolpath")
+@click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
+@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
+@click.option("--arc-tol", type=float, default=0.001, show_default=True,
+              help="Chordal deviation of arcs and splines expanded into points, mm.")
+@click.option("--quiet", "-q", is_flag=True, help="No dialect line and no warnings on stderr.")
+@_reader_option_group
+@user_errors
+def toolpath_command(cl_file: str, output: str | None, units: str | None, arc_tol: float, quiet: bool,
+                     arc_direction: str | None, frame: str | None) -> None:
+    """Write the toolpath exactly as the reader understood it, as CSV.
+
+    Columns x,y,z (tool tip, mm, part frame), i,j,k (unit tool axis), feed (mm/min; empty on
+    rapids, 1/min on inverse-time moves), motion (feed, rapid, arc, spline, cycle), line (CL
+    line). Arcs, helices, splines and cycles are expanded. The dialect and the conventions used
+    go to stderr, to compare with the CAM system's own display.
+    """
+    from .cl import read_toolpath
+    from .toolpath import MOTION_KINDS
+
+    if not (np.isfinite(arc_tol) and arc_tol > 0):
+        raise InputError("--arc-tol must be a positive number of mm")
+    tp = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame)
+    if not quiet:
+        click.echo(f"verne-post: {cl_file}: {tp.dialect}; {len(tp)} poses, source units {tp.units}", err=True)
+        for warning in tp.warnings:
+            click.echo(f"verne-post: warning: {warning}", err=True)
+    motion = tp.motion if tp.motion is not None else np.where(tp.rapid, 1, 0)
+    feed = np.char.mod("%.6g", tp.feed)
+    feed[~np.isfinite(tp.feed)] = ""
+    table = {"x": tp.tip[:, 0], "y": tp.tip[:, 1], "z": tp.tip[:, 2], "i": tp.axis[:, 0], "j": tp.axis[:, 1],
+             "k": tp.axis[:, 2], "feed": feed, "motion": np.array(MOTION_KINDS)[motion], "line": tp.line}
+    _write_csv(table, output, {"x": "%.6f", "y": "%.6f", "z": "%.6f", "i": "%.9f", "j": "%.9f", "k": "%.9f",
+                               "feed": "%s", "motion": "%s", "line": "%d"})

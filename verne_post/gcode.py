@@ -41,7 +41,7 @@ import numpy as np
 from verne_post.atomic import atomic_write
 from verne_post.errors import CheckError
 from verne_post.numbers import fixed_field, scaled_int
-from verne_post.toolpath import Comment, Coolant, Event, Spindle, Stop, ToolChange
+from verne_post.toolpath import Comment, Coolant, Dwell, Event, Spindle, Stop, ToolChange
 
 __all__ = [
     "MAX_COMMENT_CHARS",
@@ -232,6 +232,11 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat) -> list[tuple
         return [(f"({text})", False)] if text else []
     if isinstance(event, Stop):
         return [("M1" if event.optional else "M0", True)]
+    if isinstance(event, Dwell):
+        seconds = float(event.seconds)
+        if not (np.isfinite(seconds) and seconds >= 0):
+            raise ValueError(f"{where}: dwell {seconds} s must be >= 0")
+        return [(f"G4 P{_plain(seconds, 3)}", True)]
     raise TypeError(f"unknown event type {type(event).__name__}")
 
 

@@ -39,6 +39,8 @@ class PostOptions:
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
     axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
+    arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
+    frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
     plan: bool = True  # time-parametrise (toppra, ruckig); False: feeds from the programmed feed only
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
@@ -164,7 +166,8 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
         clock = now
         progress(stage)
 
-    toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol)
+    toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
+                             arc_direction=options.arc_direction, frame=options.frame)
     lap("parse")
     poses = machine_poses(toolpath, machine, work_offset=options.work_offset, tool_length=options.tool_length)
     cone = np.radians(machine.pole.cone)

@@ -11,6 +11,8 @@ from typing import Literal
 
 import numpy as np
 
+MOTION_KINDS = ("feed", "rapid", "arc", "spline", "cycle")  # what a pose's motion came from in the CL file
+
 
 @dataclass(frozen=True)
 class ToolChange:
@@ -61,7 +63,16 @@ class Stop:
     optional: bool = False
 
 
-Event = ToolChange | Spindle | Coolant | Comment | Stop
+@dataclass(frozen=True)
+class Dwell:
+    """Dwell of ``seconds`` (s) before pose ``index``, the tool standing still (a drilling cycle's pause)."""
+
+    index: int
+    line: int
+    seconds: float
+
+
+Event = ToolChange | Spindle | Coolant | Comment | Stop | Dwell
 
 
 @dataclass(frozen=True)
@@ -90,6 +101,8 @@ class Toolpath:
     part_name: str | None = None
     units: Literal["mm", "inch"] = "mm"
     warnings: tuple[str, ...] = field(default=())
+    dialect: str = "CSV poses"  # the CAM dialect and conventions the reader applied
+    motion: np.ndarray | None = None  # (N,) int8: how pose k is reached, an index into MOTION_KINDS
 
     def __len__(self) -> int:
         return int(self.tip.shape[0])

@@ -1,0 +1,85 @@
+"""Frame records: MSYS, CSYS, ORIGIN, TRNTYP; what they do to the data is the dialect's ``frames``.
+
+``MSYS/x,y,z,xi,xj,xk,yi,yj,yk`` (origin, X axis, Y axis) and ``CSYS/`` (a 3x4 matrix, row-major:
+columns X, Y, Z, origin) describe a frame; ``ORIGIN/x,y,z`` one with the same axes as the CAM's
+absolute frame. X and Y must be unit and orthogonal within 1e-3 (they are then orthonormalised and
+Z = X x Y). In ``world`` dialects the data are already in one frame and these records are read
+for validity only; ``TRNTYP`` (SolidWorks CAM's statement of that) is informational.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .lexer import Record
+from .state import ReaderState
+
+_ANG_TOL = 1e-3  # tolerance on unit length / orthogonality of MSYS and CSYS axes
+
+
+def _make_frame(st: ReaderState, o: list[float], x: list[float], y: list[float], z: list[float] | None, what: str,
+                line: int) -> None:
+    st.coordinate(o, what, line)
+    xa, ya = np.array(x, dtype=float), np.array(y, dtype=float)
+    nx, ny = float(np.linalg.norm(xa)), float(np.linalg.norm(ya))
+    if nx < 1e-9 or ny < 1e-9:
+        raise st.fail(f"{what} axis has zero length", line)
+    if abs(nx - 1.0) > _ANG_TOL or abs(ny - 1.0) > _ANG_TOL:
+        raise st.fail(f"{what} axes are not unit vectors (|X|={nx:.6g}, |Y|={ny:.6g})", line)
+    xa, ya = xa / nx, ya / ny
+    c = float(xa @ ya)
+    if abs(c) > _ANG_TOL:
+        deg = math.degrees(math.acos(max(-1.0, min(1.0, c))))
+        raise st.fail(f"{what} X and Y axes are not orthogonal ({deg:.4f} deg apart)", line)
+    ya = ya - c * xa
+    ya /= np.linalg.norm(ya)
+    za = np.cross(xa, ya)
+    if z is not None:
+        zg = np.array(z, dtype=float)
+        nz = float(np.linalg.norm(zg))
+        if abs(nz - 1.0) > _ANG_TOL or float(za @ zg) / max(nz, 1e-12) < 1.0 - _ANG_TOL:
+            raise st.fail(f"{what} matrix is not a right-handed rotation", line)
+    if st.dialect.frames == "world":
+        return
+    frame = (np.column_stack([xa, ya, za]), np.array(o, dtype=float))
+    if st.dialect.frames == "local" and not st.frame_declared:
+        # The first MCS: poses before it (a FROM, say) were written in it too.
+        st.frames[0] = frame
+    else:
+        st.frames.append(frame)
+        st.frame_id = len(st.frames) - 1
+    st.frame_declared = True
+    st.push_state()
+
+
+def msys(st: ReaderState, rec: Record) -> None:
+    v = st.numbers(rec.args, "MSYS", rec.line)
+    if len(v) != 9:
+        raise st.fail(f"MSYS needs 9 numbers (origin, X axis, Y axis), got {len(v)}", rec.line)
+    _make_frame(st, v[0:3], v[3:6], v[6:9], None, "MSYS", rec.line)
+
+
+def csys(st: ReaderState, rec: Record) -> None:
+    v = st.numbers(rec.args, "CSYS", rec.line)
+    if len(v) != 12:
+        raise st.fail(f"CSYS needs 12 numbers (3x4 matrix, row-major), got {len(v)}", rec.line)
+    m = np.array(v, dtype=float).reshape(3, 4)
+    _make_frame(st, list(m[:, 3]), list(m[:, 0]), list(m[:, 1]), list(m[:, 2]), "CSYS", rec.line)
+
+
+def origin(st: ReaderState, rec: Record) -> None:
+    v = st.numbers(rec.args, "ORIGIN", rec.line)
+    if len(v) != 3:
+        raise st.fail(f"ORIGIN needs 3 numbers (the work origin), got {len(v)}", rec.line)
+    _make_frame(st, v, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], None, "ORIGIN", rec.line)
+
+
+def trntyp(st: ReaderState, rec: Record) -> None:
+    words = [t for t in st.tokens(rec.args, "TRNTYP", rec.line) if isinstance(t, str)]
+    if words and words[0] != "WORLD":
+        st.warn(rec.line, f"TRNTYP/{words[0][:40]}: only TRNTYP/WORLD is known; the data are read as they are")
+
+
+HANDLERS = {"MSYS": msys, "CSYS": csys, "ORIGIN": origin, "TRNTYP": trntyp}

@@ -1,0 +1,115 @@
+"""Logical records of an APT / CLSF file: continuations joined, comments removed, line numbers kept.
+
+The lexer knows the *syntax* every CAM family shares and nothing of what a record means:
+
+- ``WORD/args`` (``WORD / args`` with any spaces or TABs); a record without a slash
+  (``RAPID``, ``END``, ``GOHOME``) has empty args; multi-word names (``TOOL PATH``) are folded
+  to single spaces and upper-cased.
+- ``$$`` starts a comment that runs to the end of the line. A ``$`` at the end of the remaining
+  text continues the record on the next line (blank and comment-only lines inside are skipped).
+- Comment records that end in ``$`` continue too: Creo's ``$$-> CSYS / ... $`` runs onto plain
+  lines of numbers that belong to the comment, not to a record of their own.
+- ``PPRINT``, ``PARTNO`` and ``INSERT`` carry free text, taken literally (a ``$`` or ``$$`` in it is
+  text); Pro/ENGINEER writes ``PARTNO`` with a space instead of the slash.
+- NX "Information listing" headers (before the first record) and ``Tool Path Listing has N lines``
+  trailers are skipped; their fields are TAB- or space-separated.
+
+Each record is yielded as a :class:`Record` (word, argument text, 1-based first line).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Iterator
+from typing import NamedTuple
+
+__all__ = ["TEXT_RECORDS", "Record", "records", "split_lines"]
+
+TEXT_RECORDS = frozenset({"PPRINT", "PARTNO", "INSERT"})
+
+# NX "Information listing" header lines (only before the first APT record) and trailer lines.
+_HEADER_RE = re.compile(
+    r"(?:=+|-{3,}|Information listing created by\s*:.*|(?:Date|Current work part|Node name)\s*:.*)\Z",
+    re.IGNORECASE,
+)
+_TRAILER_RE = re.compile(r"(?:Tool Path Listing has \d+ lines\.?|=+)\Z", re.IGNORECASE)
+_TEXT_HEAD_RE = re.compile(r"(PPRINT|PARTNO|INSERT)(?:[ \t]*/|[ \t]+|\Z)", re.IGNORECASE)
+
+
+class Record(NamedTuple):
+    """One logical record: ``word`` upper-case (``"GOTO"``, ``"TOOL PATH"``), ``args`` after the slash."""
+
+    word: str
+    args: str
+    line: int
+
+
+def split_lines(text: str) -> list[str]:
+    """Lines of ``text`` with CRLF or CR line ends, without a trailing empty line."""
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    return lines
+
+
+def _make(body: str, line: int) -> Record | None:
+    s = body.strip()
+    if not s:
+        return None
+    head, _sep, args = s.partition("/")
+    return Record(" ".join(head.split()).upper(), args, line)
+
+
+def records(lines: Iterable[str]) -> Iterator[Record]:
+    """The logical records of ``lines`` in file order (see the module docstring)."""
+    pending: list[str] | None = None  # parts of a record continued with '$'
+    pending_line = 0
+    in_comment = False  # a '$$' comment continued with '$'
+    seen_record = False
+    for lineno, raw in enumerate(lines, 1):
+        if in_comment:
+            # Creo continues a '$$->' comment onto plain lines of numbers; a record ends it.
+            s = raw.strip()
+            if not s or s[0] in "0123456789+-.":
+                in_comment = s.endswith("$")
+                continue
+            in_comment = False
+        if pending is None and raw[:5] == "GOTO/" and "$" not in raw:
+            seen_record = True
+            yield Record("GOTO", raw[5:], lineno)  # the common case, kept cheap
+            continue
+        if pending is None:
+            s = raw.strip()
+            if not s:
+                continue
+            if s.startswith("$$"):
+                in_comment = s.endswith("$") and not s.endswith("$$")
+                continue
+            text = _TEXT_HEAD_RE.match(s)
+            if text is not None:
+                seen_record = True
+                yield Record(text.group(1).upper(), s[text.end():].strip(), lineno)
+                continue
+            if _TRAILER_RE.match(s) or (not seen_record and _HEADER_RE.match(s)):
+                continue
+        cut = raw.find("$$")
+        body = (raw if cut < 0 else raw[:cut]).rstrip()
+        if body.endswith("$"):
+            if pending is None:
+                pending, pending_line = [], lineno
+            pending.append(body[:-1])
+            continue
+        line = lineno
+        if pending is not None:
+            if not body.strip():
+                continue  # blank or comment-only line inside a continued record
+            pending.append(body)
+            body, line, pending = "".join(pending), pending_line, None
+        record = _make(body, line)
+        if record is not None:
+            seen_record = True
+            yield record
+    if pending is not None:
+        yield Record("$", "", pending_line)  # an unfinished continuation: the reader reports it

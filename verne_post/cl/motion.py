@@ -1,0 +1,122 @@
+"""Motion records: GOTO, FROM, GOHOME, GODLTA, RAPID, MULTAX, TLAXIS (positions in file units, CL frame).
+
+``GOTO/x,y,z[,i,j,k]``: 3 numbers carry the last tool axis (initially (0,0,1)); any other count is
+an error because no CAM format we know defines it. ``FROM`` is the tool's starting position,
+remembered for ``GOHOME``: a rapid pose once a tool is loaded; before the first tool load (Makino
+FF CAM writes it there) it only sets the start, since no tool length could place it.
+``GODLTA/d`` moves along the tool axis, ``GODLTA/dx,dy,dz`` by a vector; ``RAPID``
+makes the next motion a rapid; ``MULTAX/OFF`` resets the axis to (0,0,1) and forbids 6-number
+GOTOs; ``TLAXIS/i,j,k`` sets the carried axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import curves, cycle_records
+from .lexer import Record
+from .state import ReaderState
+
+Axis = tuple[float, float, float]
+
+
+def point_axis(st: ReaderState, args: str, what: str, line: int) -> tuple[list[float], Axis]:
+    vals = st.numbers(args, what, line)
+    if len(vals) not in (3, 6):
+        raise st.fail(f"{what} needs 3 or 6 numbers, got {len(vals)}", line)
+    st.coordinate(vals[:3], what, line)
+    if len(vals) == 6:
+        if st.multax is False:
+            raise st.fail(f"{what} has a tool axis (6 numbers) but MULTAX/OFF is in effect", line)
+        st.check_axis(vals[3:], "tool axis", line)
+        return vals[:3], (vals[3], vals[4], vals[5])
+    return vals, st.axis
+
+
+def motion_to(st: ReaderState, p: list[float], a: Axis, line: int) -> None:
+    """A motion to ``p`` (file units, CL frame): ends a pending arc, runs a drilling cycle, or moves."""
+    if st.curve is not None:
+        curves.end_curve(st, p, a, line)
+    elif st.cycle is not None:
+        cycle_records.drill(st, p, a, line)
+    else:
+        if st.skip_goto is not None:
+            repeat = np.allclose(p, st.skip_goto, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(p).max())))
+            st.skip_goto = None
+            if repeat and st.axis == a:
+                return
+        st.axis = a
+        st.add_pose(p, a, line, st.take_rapid())
+
+
+def goto(st: ReaderState, rec: Record) -> None:
+    p, a = point_axis(st, rec.args, "GOTO", rec.line)
+    motion_to(st, p, a, rec.line)
+
+
+def from_(st: ReaderState, rec: Record) -> None:
+    curves.no_pending_curve(st, "FROM", rec.line)
+    p, a = point_axis(st, rec.args, "FROM", rec.line)
+    st.axis = a
+    st.take_rapid()
+    if st.tools is not None:
+        st.add_pose(p, a, rec.line, rapid=True)
+    st.home = (st.frame_id, np.array(p, dtype=float), np.array(a) / np.linalg.norm(a))
+
+
+def gohome(st: ReaderState, rec: Record) -> None:
+    curves.no_pending_curve(st, "GOHOME", rec.line)
+    if st.home is None:
+        raise st.fail("GOHOME without a FROM position", rec.line)
+    frame, tip, axis = st.home
+    p, a = st.from_part(*st.to_part(tip, axis, frame))
+    st.axis = (float(a[0]), float(a[1]), float(a[2]))
+    st.take_rapid()
+    st.add_pose(p, st.axis, rec.line, rapid=True)
+
+
+def godlta(st: ReaderState, rec: Record) -> None:
+    curves.no_pending_curve(st, "GODLTA", rec.line)
+    if st.cycle is not None:
+        raise st.fail("GODLTA inside a drilling CYCLE is not supported", rec.line)
+    vals = st.numbers(rec.args, "GODLTA", rec.line)
+    st.coordinate(vals, "GODLTA", rec.line)
+    p, a = st.current_pose("GODLTA", rec.line)
+    if len(vals) == 1:
+        q = p + vals[0] * a
+    elif len(vals) == 3:
+        q = p + np.array(vals)
+    else:
+        raise st.fail(f"GODLTA needs 1 or 3 numbers, got {len(vals)}", rec.line)
+    motion_to(st, [float(v) for v in q], st.axis, rec.line)
+
+
+def rapid(st: ReaderState, rec: Record) -> None:
+    if rec.args.strip():
+        st.warn(rec.line, f"RAPID/{rec.args.strip()[:40]}: arguments ignored", kind="RAPID args")
+    st.rapid_next = True
+
+
+def tlaxis(st: ReaderState, rec: Record) -> None:
+    vals = st.numbers(rec.args, "TLAXIS", rec.line)
+    if len(vals) != 3:
+        raise st.fail(f"TLAXIS needs 3 numbers, got {len(vals)}", rec.line)
+    st.check_axis(vals, "tool axis", rec.line)
+    st.axis = (vals[0], vals[1], vals[2])
+
+
+def multax(st: ReaderState, rec: Record) -> None:
+    word = rec.args.strip().upper()
+    if word == "ON":
+        st.multax = True
+    elif word == "OFF":
+        st.multax = False
+        st.axis = (0.0, 0.0, 1.0)
+    else:
+        raise st.fail(f"MULTAX needs ON or OFF, got '{rec.args.strip()[:40]}'", rec.line)
+
+
+HANDLERS = {
+    "GOTO": goto, "FROM": from_, "GOHOME": gohome, "GODLTA": godlta, "RAPID": rapid, "TLAXIS": tlaxis,
+    "MULTAX": multax,
+}  # fmt: skip

@@ -1,0 +1,344 @@
+"""The reader's state: poses read so far, modal settings, and the helpers every record family uses.
+
+All lengths inside are in the file's units and in the CL frame of the record that wrote them;
+:meth:`ReaderState.result` converts to mm and to the part frame once, over whole arrays.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from verne_post.errors import InputError
+from verne_post.toolpath import MOTION_KINDS, Event, Toolpath
+
+from .dialects import Dialect
+
+MM_PER_INCH = 25.4
+MAX_COORD = 1e7  # |coordinate| limit in file units: anything larger is corrupt data
+MAX_TOOL_NUMBER = 999_999_999
+AXIS_LEN_TOL = 0.01  # a tool axis may be off unit length by this much (rounded CL output)
+
+_NUM_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
+_WORD_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]*\Z")
+MOTION = {name: code for code, name in enumerate(MOTION_KINDS)}
+
+Units = Literal["mm", "inch"]
+Token = float | str
+UNIT_WORDS: dict[str, Units] = {
+    "MM": "mm", "MILLIMETERS": "mm", "MILLIMETRES": "mm", "INCH": "inch", "INCHES": "inch", "IN": "inch",
+}  # fmt: skip
+
+
+def parse_number(tok: str, what: str, src: str, line: int) -> float:
+    """Strict APT number (``25.``, ``.5``, ``-1.E+02``); NaN, inf, overflow and anything else raise."""
+    t = tok.strip()
+    if _NUM_RE.match(t):
+        value = float(t)
+        if math.isinf(value):
+            raise InputError(f"number {t} out of range in {what}", source=src, line=line)
+        return value
+    low = t.lower().lstrip("+-")
+    if low == "nan":
+        raise InputError(f"NaN in {what}", source=src, line=line)
+    if low in ("inf", "infinity"):
+        raise InputError(f"infinite value in {what}", source=src, line=line)
+    if not t:
+        raise InputError(f"empty field in {what}", source=src, line=line)
+    raise InputError(f"'{t}' is not a number", source=src, line=line)
+
+
+@dataclass
+class Warnings:
+    """Warnings grouped by kind: one line each, with the first line and how often it occurred."""
+
+    src: str
+    kinds: dict[str, list[Any]] = field(default_factory=dict)  # kind -> [first line, text, count]
+
+    def add(self, line: int | None, text: str, kind: str | None = None) -> None:
+        entry = self.kinds.setdefault(kind or text, [line, text, 0])
+        entry[2] += 1
+
+    def lines(self) -> tuple[str, ...]:
+        out = []
+        for line, text, count in self.kinds.values():
+            where = f"{self.src}:{line}: " if line is not None else f"{self.src}: "
+            more = f" ({count} records like this, the first here)" if count > 1 else ""
+            out.append(f"{where}{text}{more}")
+        return tuple(out)
+
+
+@dataclass
+class Arc:
+    """An arc's record for the direction check: pose indices and its centre and unit axis (file units)."""
+
+    start: int  # pose index of the arc's start point
+    end: int  # pose index of its end point
+    centre: np.ndarray
+    axis: np.ndarray
+    line: int
+
+
+class ReaderState:
+    """Poses, modal state and shared helpers; record handlers (the family modules) act on it."""
+
+    def __init__(self, src: str, units: Units, units_given: bool, tol_mm: float, dialect: Dialect,
+                 warnings: Warnings) -> None:
+        self.src = src
+        self.units: Units = units
+        self.units_given = units_given
+        self.scale = MM_PER_INCH if units == "inch" else 1.0
+        self.tol = tol_mm / self.scale  # chordal tolerance in file units
+        self.dialect = dialect
+        self.arc_direction = dialect.arc_direction or "ccw"  # a provisional reading where undocumented
+        self.warnings = warnings
+        # poses: rows of [x, y, z, i, j, k] in the CL frame of their run, file units
+        self.rows: list[list[float]] = []
+        self.lines: list[int] = []
+        self.motion: dict[int, int] = {}  # pose index -> MOTION code where not a plain feed move
+        self.feed_override: dict[int, float] = {}
+        # modal runs: (first pose index, feed mm/min or 1/min, inverse time, tool, frame id)
+        self.runs: list[tuple[int, float, bool, int, int]] = [(0, math.nan, False, 0, 0)]
+        self.events: list[Event | None] = []
+        self.frames: list[tuple[np.ndarray, np.ndarray]] = [(np.eye(3), np.zeros(3))]
+        self.frame_id = 0
+        self.frame_declared = False  # a frame record has been read
+        self.arcs: list[Arc] = []
+        self.axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+        self.rapid_next = False
+        self.feed_val = math.nan
+        self.inverse = False
+        self.feed_problem = "feed move before any FEDRAT"
+        self.fpr: float | None = None  # feed per revolution, mm/rev
+        self.rpm: float | None = None
+        self.spindle_dir: Literal["CW", "CCW"] = "CW"
+        self.spindle_on = False
+        self.tool = 0
+        self.multax: bool | None = None
+        self.cycle: Any = None  # the active drilling cycle (cycles.CycleSpec) or None
+        self.last_cycle: Any = None
+        self.curve: Any = None  # a CIRCLE/MOVARC waiting for its end GOTO, or a NURBS being read
+        self.skip_goto: np.ndarray | None = None  # a GOTO repeating this point (a spline's end) adds nothing
+        self.home: tuple[int, np.ndarray, np.ndarray] | None = None  # FROM pose: (frame id, tip, axis) in it
+        self.part_name: str | None = None
+        self.units_seen: tuple[Units, int] | None = None
+        self.cutcom_warned = False
+        self.done = False
+        self.tools: Any = None  # tools.ToolHeader: tool loads and data of the current operation header
+
+    # ------------------------------------------------------------------ messages
+
+    def fail(self, reason: str, line: int | None) -> InputError:
+        return InputError(reason, source=self.src, line=line)
+
+    def warn(self, line: int | None, text: str, kind: str | None = None) -> None:
+        self.warnings.add(line, text, kind)
+
+    # ------------------------------------------------------------------ tokens
+
+    def number(self, tok: str, what: str, line: int) -> float:
+        return parse_number(tok, what, self.src, line)
+
+    def numbers(self, args: str, what: str, line: int) -> list[float]:
+        if not args.strip():
+            return []
+        return [self.number(t, what, line) for t in args.split(",")]
+
+    def tokens(self, args: str, what: str, line: int) -> list[Token]:
+        """Split ``args`` into numbers (float) and upper-case words (str, e.g. ``1STPECK``)."""
+        out: list[Token] = []
+        if not args.strip():
+            return out
+        for tok in args.split(","):
+            t = tok.strip()
+            if _NUM_RE.match(t):
+                out.append(self.number(t, what, line))
+            elif t.lower().lstrip("+-") in ("nan", "inf", "infinity") or not t:
+                self.number(t, what, line)  # raises with the right message
+            elif _WORD_RE.match(t):
+                out.append(t.upper())
+            else:
+                raise self.fail(f"'{t}' is not a number or a word in {what}", line)
+        return out
+
+    def coordinate(self, values: list[float], what: str, line: int) -> None:
+        if any(abs(v) > MAX_COORD for v in values):
+            raise self.fail(f"coordinate out of range in {what} (|value| > {MAX_COORD:g})", line)
+
+    def check_axis(self, a: list[float] | tuple[float, ...], what: str, line: int) -> None:
+        n = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+        if n < 1e-6:
+            raise self.fail(f"{what} has zero length", line)
+        if abs(n - 1.0) > AXIS_LEN_TOL:
+            raise self.fail(f"{what} has length {n:.6g}, expected a unit vector", line)
+
+    # ------------------------------------------------------------------ poses and modal state
+
+    def fast_goto_ok(self) -> bool:
+        """True when a plain GOTO needs nothing but appending (the reader's fast path)."""
+        return (
+            not self.rapid_next
+            and self.feed_val == self.feed_val  # a feed is programmed (not NaN)
+            and self.cycle is None
+            and self.curve is None
+            and self.skip_goto is None
+            and (self.tools is None or not self.tools.open)
+            and self.multax is not False
+        )
+
+    def push_state(self) -> None:
+        state = (len(self.lines), self.feed_val, self.inverse, self.tool, self.frame_id)
+        last = self.runs[-1]
+        same_feed = last[1] == state[1] or (last[1] != last[1] and state[1] != state[1])
+        if same_feed and last[2:] == state[2:]:
+            return
+        if last[0] == state[0]:
+            self.runs[-1] = state
+        else:
+            self.runs.append(state)
+
+    def add_pose(self, p: list[float] | np.ndarray, a: tuple[float, ...] | np.ndarray, line: int, rapid: bool,
+                 feed: float | None = None, motion: str = "feed") -> None:
+        if self.tools is not None and self.tools.open:
+            self.tools.close(self)
+        if not rapid and feed is None and self.feed_val != self.feed_val:
+            raise self.fail(self.feed_problem, line)
+        idx = len(self.lines)
+        self.rows.append([float(p[0]), float(p[1]), float(p[2]), float(a[0]), float(a[1]), float(a[2])])
+        self.lines.append(line)
+        code = MOTION["rapid"] if rapid else MOTION[motion]
+        if code:
+            self.motion[idx] = code
+        if feed is not None and not rapid:
+            self.feed_override[idx] = feed
+
+    def add_poses(self, points: np.ndarray, axes: np.ndarray, line: int, rapid: bool, motion: str) -> None:
+        """Append expanded curve poses (N, 3) at once, all carrying ``line``."""
+        if not len(points):
+            return
+        self.add_pose(points[0], axes[0], line, rapid, motion=motion)
+        start = len(self.lines)
+        self.rows.extend(np.hstack([points[1:], axes[1:]]).tolist())
+        self.lines.extend([line] * (len(points) - 1))
+        code = MOTION["rapid"] if rapid else MOTION[motion]
+        if code:
+            self.motion.update(dict.fromkeys(range(start, len(self.lines)), code))
+
+    def take_rapid(self) -> bool:
+        r = self.rapid_next
+        self.rapid_next = False
+        return r
+
+    def frame_of_pose(self, idx: int) -> int:
+        for start, _f, _i, _t, frame in reversed(self.runs):
+            if start <= idx:
+                return frame
+        return 0
+
+    def to_part(self, p: np.ndarray, a: np.ndarray, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        R, o = self.frames[frame]
+        return o + R @ p, R @ a
+
+    def from_part(self, p: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R, o = self.frames[self.frame_id]
+        return R.T @ (p - o), R.T @ a
+
+    def current_pose(self, what: str, line: int) -> tuple[np.ndarray, np.ndarray]:
+        """Last pose (tip, unit axis) expressed in the current CL frame."""
+        if not self.rows:
+            raise self.fail(f"{what} with no current position (no GOTO or FROM before it)", line)
+        row = np.array(self.rows[-1], dtype=float)
+        p, a = row[:3], row[3:] / np.linalg.norm(row[3:])
+        frame = self.frame_of_pose(len(self.rows) - 1)
+        if frame != self.frame_id:
+            p, a = self.from_part(*self.to_part(p, a, frame))
+        return p, a
+
+    # ------------------------------------------------------------------ result
+
+    def result(self) -> Toolpath:
+        n = len(self.rows)
+        if n == 0:
+            raise InputError("no motion records in file", source=self.src)
+        arr = np.array(self.rows, dtype=float)
+        tip, axis = arr[:, :3].copy(), arr[:, 3:].copy()
+        line = np.array(self.lines, dtype=np.int64)
+        validate_poses(tip, axis, line, self.src, "GOTO")
+        axis /= np.sqrt(np.einsum("ij,ij->i", axis, axis))[:, None]
+        starts = np.array([r[0] for r in self.runs], dtype=np.int64)
+        counts = np.diff(np.append(starts, n))
+        feed = np.repeat(np.array([r[1] for r in self.runs], dtype=float), counts)
+        inverse = np.repeat(np.array([r[2] for r in self.runs], dtype=bool), counts)
+        tool = np.repeat(np.array([r[3] for r in self.runs], dtype=np.int64), counts)
+        frame = np.repeat(np.array([r[4] for r in self.runs], dtype=np.int64), counts)
+        tip, axis = self._to_common_frame(tip, axis, frame, line)
+        tip *= self.scale
+        motion = np.zeros(n, dtype=np.int8)
+        if self.motion:
+            motion[np.fromiter(self.motion.keys(), dtype=np.int64)] = np.fromiter(self.motion.values(), dtype=np.int8)
+        rapid = motion == MOTION["rapid"]
+        for idx, f in self.feed_override.items():
+            feed[idx] = f
+            inverse[idx] = False
+        feed[rapid] = np.nan
+        inverse[rapid] = False
+        return Toolpath(
+            source=self.src, tip=np.ascontiguousarray(tip), axis=np.ascontiguousarray(axis), line=line,
+            rapid=rapid, feed=feed, tool=tool, inverse_time=inverse,
+            events=tuple(e for e in self.events if e is not None), part_name=self.part_name, units=self.units,
+            warnings=self.warnings.lines(), dialect=self.dialect.describe(self.arc_direction), motion=motion,
+        )  # fmt: skip
+
+    def _to_common_frame(self, tip: np.ndarray, axis: np.ndarray, frame: np.ndarray, line: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Apply the frame records as the dialect says (``apply``), or bring every ``local`` frame
+        into the first pose's frame so that one work offset places the whole part."""
+        used = sorted(set(np.unique(frame).tolist()))
+        if self.dialect.frames == "apply":
+            targets = {fid: self.frames[fid] for fid in used if fid != 0}
+        else:
+            ref = int(frame[0])
+            R0, o0 = self.frames[ref]  # the first MCS (frame 0 takes the first frame record)
+            distinct = [fid for fid in used if fid != ref and not _same_frame(self.frames[fid], (R0, o0))]
+            if distinct:
+                first = int(line[np.argmax(np.isin(frame, distinct))])
+                self.warn(first, f"{len(distinct) + 1} different machine coordinate systems (MSYS/CSYS/ORIGIN): "
+                          "later operations are transformed into the first one's frame")
+            targets = {fid: (R0.T @ self.frames[fid][0], R0.T @ (self.frames[fid][1] - o0)) for fid in distinct}
+        for fid, (R, o) in targets.items():
+            m = frame == fid
+            tip[m] = o + tip[m] @ R.T
+            axis[m] = axis[m] @ R.T
+        return tip, axis
+
+
+def _same_frame(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> bool:
+    return bool(np.allclose(a[0], b[0], atol=1e-9) and np.allclose(a[1], b[1], atol=1e-9))
+
+
+def validate_poses(tip: np.ndarray, axis: np.ndarray, line: np.ndarray, src: str, what: str) -> None:
+    """Raise for the first (by line) pose with a non-finite value or a non-unit / zero tool axis."""
+    finite = np.isfinite(tip).all(axis=1) & np.isfinite(axis).all(axis=1)
+    safe = np.where(np.isfinite(axis), axis, 0.0)
+    norms = np.sqrt(np.einsum("ij,ij->i", safe, safe))
+    huge = (np.abs(np.where(np.isfinite(tip), tip, 0.0)) > MAX_COORD).any(axis=1)
+    bad = ~finite | huge | (norms < 1e-6) | (np.abs(norms - 1.0) > AXIS_LEN_TOL)
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[np.argmin(line[bad])])
+    row = np.concatenate([tip[k], axis[k]])
+    if np.isnan(row).any():
+        reason = f"NaN in {what}"
+    elif not np.isfinite(row).all():
+        reason = f"infinite value in {what}"
+    elif huge[k]:
+        reason = f"coordinate out of range in {what} (|value| > {MAX_COORD:g})"
+    elif norms[k] < 1e-6:
+        reason = "tool axis has zero length"
+    else:
+        reason = f"tool axis has length {norms[k]:.6g}, expected a unit vector"
+    raise InputError(reason, source=src, line=int(line[k]))
