@@ -54,7 +54,10 @@ CNTRL_1 is where the tool is. How to decide on a real file: measure ``|CNTRL_1 -
 position|`` over its splines; if it is zero for every spline, the quadratic reading is the one
 NX means; if it is generally not zero, only the cubic reading keeps the path continuous.
 
-No ``NURBS/`` arguments (order, knot count) and no weights were seen in real files. ``weights``
+NX's MOM order is not always 4 (the same Sinumerik post turns order-2 splines into linear
+moves), but the CLSF records carry no order, so the count fixes it; a file whose counts differ
+from ``n - 2`` is refused rather than guessed at. No ``NURBS/`` arguments (order, knot count)
+and no weights were seen in real files. ``weights``
 is accepted for a ``CNTRL/x,y,z,w`` form should one appear (the start point then has weight 1);
 the reader decides whether to pass it.
 
