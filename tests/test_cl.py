@@ -795,22 +795,35 @@ def test_drill_cycle_on_reuses_last(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("cycle", "message"),
     [
-        ("CYCLE/DEEP,10,2,MMPM,250,3", "peck drilling"),
-        ("CYCLE/BRKCHP,10,2,MMPM,250,3", "chip-breaking"),
-        ("CYCLE/DRILL,DEEP,RAPTO,3,FEDTO,-10,STEP,2,MMPM,250", "peck drilling"),
-        ("CYCLE/DRILL,BRKCHP,RAPTO,3,FEDTO,-10,MMPM,250", "chip-breaking"),
         ("CYCLE/TAP,10,MMPR,1.5,3", "tapping"),
-        ("CYCLE/DRILL,10,MMPM,250,3,DWELL,2", "dwell"),
-        ("CYCLE/DRILL,RAPTO,3,FEDTO,-10,STEP,2", "this CYCLE/DRILL form is not supported"),
-        ("CYCLE/DRILL,10,MMPM,250", "no clearance"),
-        ("CYCLE/DRILL,CLEAR,3,MMPM,250", "no depth"),
-        ("CYCLE/WHIRL,1", "CYCLE/WHIRL is not supported"),
+        ("CYCLE/DRILL,RAPTO,3,FEDTO,-10,STEP,2", "does not peck"),
+        ("CYCLE/DRILL,10,MMPM,250", "clearance"),
+        ("CYCLE/DRILL,CLEAR,3,MMPM,250", "depth"),
+        ("CYCLE/WHIRL,1", "not a known cycle"),
     ],
 )
 def test_unsupported_cycles_rejected(tmp_path: Path, cycle: str, message: str) -> None:
     e = err(tmp_path, drill_file(cycle))
     assert e.line == 6 and message in e.reason
 
+
+def test_solidworks_peck_cycle_expanded_with_dwell_and_cycle_ending_at_tool_change(tmp_path: Path) -> None:
+    # CL-DIALECTS: SolidWorks CAM writes CYCLE/INIT, then DEEP2 with 1STPECK/SUBPECK; a cycle may stay
+    # active into the next tool's operation without CYCLE/OFF.
+    text = ("UNITS/MM\nFEDRAT/MMPM,500\nCYCLE/INIT\n"
+            "CYCLE/DEEP2,FEDTO,10.1,1STPECK,5.,SUBPECK,2.,MMPM,1097.28,RAPTO,3.,RTRCTO,10.\nGOTO/0,0,0\n"
+            "CYCLE/DRILL,FEDTO,2.75344,MMPM,731.52,RAPTO,3.,RTRCTO,10.,DWELL,1.5\nGOTO/20,0,0\n"
+            "LOADTL/2\nGOTO/40,0,5\n")
+    tp = cl(tmp_path, text)
+    hole = tp.tip[tp.line == 5]
+    feeds = hole[~tp.rapid[tp.line == 5]]
+    # the bottoms of the pecks: 5, 7, 9, 10.1 mm deep (first peck 5, then 2 each, last one short)
+    np.testing.assert_allclose(sorted(set(np.round(-feeds[:, 2], 9)) & {5.0, 7.0, 9.0, 10.1}), [5, 7, 9, 10.1])
+    assert -hole[:, 2].max() <= -3 and hole[:, 2].min() == pytest.approx(-10.1)
+    np.testing.assert_allclose(tp.feed[(tp.line == 5) & ~tp.rapid], 1097.28)
+    dwell = [e for e in tp.events if type(e).__name__ == "Dwell"]
+    assert [(d.seconds, d.line) for d in dwell] == [(1.5, 7)]
+    assert tp.line[-1] == 9 and tp.tip[-1].tolist() == [40, 0, 5]  # after the tool change: a plain move
 
 # --------------------------------------------------------------------------- malformed input
 

@@ -366,3 +366,34 @@ def test_check_on_real_samples_never_bad_input(name: str) -> None:
     result = CliRunner().invoke(main, ["check", str(SAMPLES / name), "--no-timing", "-q", "--tool-length", "100"])
     assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
     assert result.exit_code in (0, 3), result.output
+
+
+# --------------------------------------------------------------------------- NX splines through the reader
+
+
+def test_nx_nurbs_records_read_as_a_curve_from_the_tool_position(tmp_path: Path) -> None:
+    from test_cl_spline import curve_at, distance_to_polyline  # the independent Cox-de Boor evaluator
+
+    start = np.array([0.0, 0.0, 10.0])
+    control = np.array([[10.0, 20, 10], [30, 25, 12], [45, -5, 10], [60, 10, 9], [80, 0, 10]])
+    knots = [0.3, 0.6, 1.0]  # n - 2 values for n = 5 CNTRL records, the last 1 (CL-DIALECTS)
+    text = (NX_HEAD + "GOTO/0,0,10\nNURBS/\nKNOT/0.3,0.6\n$$ continued\nKNOT/1.0\n"
+            + "".join(f"CNTRL/{x:g},{y:g},{z:g}\n" for x, y, z in control) + "GOTO/80,0,10\nGOTO/90,0,10\n")
+    tp = read(tmp_path, text, chordal_tolerance=0.001)
+    spline = tp.motion == MOTION_KINDS.index("spline")
+    assert (tp.line[spline] == 6).all()
+    pts = tp.tip[spline]
+    np.testing.assert_allclose(pts[-1], control[-1])  # ends on the last control point
+    assert tp.line[-1] == 16 and tp.line[-2] == 6  # the GOTO repeating the end (line 15) adds nothing
+    full_knots = np.r_[[0.0] * 4, knots[:-1], [1.0] * 4]
+    true = curve_at(full_knots, 3, np.vstack([start, control]), None, np.linspace(0, 1, 20001))
+    np.testing.assert_allclose(true[0], start)  # the curve starts where the tool is
+    poly = np.vstack([start, pts])
+    assert distance_to_polyline(true, poly).max() <= 0.0011
+
+
+def test_nurbs_with_a_wrong_knot_count_names_its_line(tmp_path: Path) -> None:
+    cntrl = "".join(f"CNTRL/{k},{k},{k}\n" for k in range(1, 5))
+    text = NX_HEAD + "GOTO/0,0,10\nNURBS/\nKNOT/0.2,0.5,1.0\n" + cntrl + "GOTO/4,4,4\n"
+    e = refused(tmp_path, text)
+    assert e.line == 6 and "NURBS" in e.reason

@@ -36,7 +36,8 @@ def cycle(st: ReaderState, rec: Record) -> None:
     try:
         spec = cycles.parse_cycle(toks)
     except ValueError as error:
-        raise st.fail(f"CYCLE/{kind[:20]}: {error}", rec.line) from None
+        reason = str(error)
+        raise st.fail(reason if reason.startswith("CYCLE") else f"CYCLE/{kind[:20]}: {reason}", rec.line) from None
     if spec.feed is not None:
         feed = feed_from(st, spec.feed, spec.feed_unit, "CYCLE", rec.line)
     elif st.feed_val == st.feed_val and not st.inverse:
