@@ -26,7 +26,7 @@ from .machine import Machine
 from .poses import MachinePoses, machine_poses
 from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
-from .toolpath import ToolChange
+from .toolpath import Dwell, ToolChange
 
 
 @dataclass(frozen=True)
@@ -105,8 +105,10 @@ class PostResult:
         speed = feed_speed(self.poses, self.blocks, self.duration)
         budget = time_budget(self.schedule, self.blocks.joints, self.blocks.tip, speed, limits,
                              np.radians(machine.timing.rotary_feed) / 60.0)
+        dwell = sum(e.seconds for e in self.poses.events if isinstance(e, Dwell))
         return {
-            "cycle_time_s": self.schedule.total,
+            "cycle_time_s": self.schedule.total + dwell,
+            "dwell_time_s": dwell,
             "rapid_time_s": float(np.sum(self.duration[self.rapid])),
             **budget,
             "time_per_tool_s": {str(t): float(np.sum(self.duration[tools == t])) for t in np.unique(tools)},
