@@ -21,6 +21,7 @@ from .dialects import Dialect
 MM_PER_INCH = 25.4
 MAX_COORD = 1e7  # |coordinate| limit in file units: anything larger is corrupt data
 MAX_TOOL_NUMBER = 999_999_999
+MAX_EXPANDED_POSES = 20_000_000  # arcs, splines and cycles may not expand a file beyond this
 AXIS_LEN_TOL = 0.01  # a tool axis may be off unit length by this much (rounded CL output)
 
 _NUM_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
@@ -220,6 +221,9 @@ class ReaderState:
         """Append expanded curve poses (N, 3) at once, all carrying ``line``."""
         if not len(points):
             return
+        if len(self.lines) + len(points) > MAX_EXPANDED_POSES:
+            raise self.fail(f"the expanded toolpath exceeds {MAX_EXPANDED_POSES:,} poses: a larger --arc-tol, or "
+                            "split the program", line)
         self.add_pose(points[0], axes[0], line, rapid, motion=motion)
         start = len(self.lines)
         self.rows.extend(np.hstack([points[1:], axes[1:]]).tolist())
