@@ -259,15 +259,14 @@ class _Interpreter:
             bad = _BLOCK.match(code)
             rest = code[bad.end():] if bad else code
             raise self.fail(number, f"cannot read '{rest[:20]}': only plain words (letter and number) are supported")
-        g_codes, m_codes, values = [], [], {}
+        g_codes, m_codes, values, unknown = [], [], {}, []
         for letter, value in _WORD.findall(code):
             if letter == "G":
                 g_codes.append(_code(value))
             elif letter == "M":
                 m_codes.append(_code(value))
             elif letter not in _LETTERS_ALLOWED:
-                raise self.fail(number, f"word {letter}{value}: the VERNE controller has no such word here "
-                                        f"(axes X Y Z A C; G0/G1 motion)")
+                unknown.append(letter + value)
             elif letter in values:
                 raise self.fail(number, f"two {letter} words in one block")
             else:
@@ -285,6 +284,9 @@ class _Interpreter:
             elif g not in _HARMLESS_G:
                 raise self.fail(number, f"G{g / 10:g} is not supported: a joint-space program uses G0/G1 in "
                                         f"absolute distance (G90) without offsets")
+        if unknown:  # after the G codes: "G2 is not supported" says more than "I1"
+            raise self.fail(number, f"word {unknown[0]}: the VERNE controller has no such word here (axes X Y Z "
+                                    f"A C; G0/G1 motion)")
         if "T" in values:
             self.selected = int(values["T"])
         if 60 in m_codes:
@@ -328,9 +330,10 @@ def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray
 
     scale, inverse_time, epoch = of_state("scale", float), of_state("inverse_time", bool), of_state("feed_epoch", int)
     everywhere = np.zeros(n, np.int64)
-    moves = np.any(~np.isnan(table[:, 1:6]), axis=1)
+    axes = np.any(~np.isnan(table[:, 1:6]), axis=1)
+    moves = axes | ~np.isnan(table[:, 0])  # a G0/G1 word alone is a move of length zero (as LinuxCNC does)
     motion = _last_given(table[:, 0], everywhere)
-    orphan = moves & np.isnan(motion)
+    orphan = axes & np.isnan(motion)
     if orphan.any():
         raise InputError("axis words without a motion mode (G0 or G1)", source, int(line[np.argmax(orphan)]))
     position = table[:, 1:6].copy()

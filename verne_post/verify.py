@@ -192,9 +192,15 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
 def check_program_text(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
                        axis_tol: float, work_offset: tuple[float, ...] = (0.0, 0.0, 0.0)) -> Verification:
     """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg)."""
-    findings = [Finding(line, "program", reason) for line, reason in program.problems]
-    if program.end_line is None:
-        findings.append(Finding(program.last_line, "program", "the program ends without M2/M30 (cut off?)"))
+    findings = [] if program.end_line is not None else [
+        Finding(program.last_line, "program", "the program ends without M2/M30 (cut off?)")]
+    findings += [Finding(line, "program", reason) for line, reason in program.problems]
+    unknown = ~np.all(np.isfinite(program.joints), axis=1)
+    if unknown.any():
+        k = int(np.argmax(unknown))
+        axes = "".join(a for a, known in zip("XYZAC", np.isfinite(program.joints[k]), strict=True) if not known)
+        findings.append(Finding(int(program.line[k]), "program", f"moves with {' '.join(axes)} never programmed: "
+                                                                 f"the first motion must give every axis"))
     lengths = _tool_lengths(program, machine, findings)
     motion = _Motion.of(program, machine, lengths, tol, np.radians(axis_tol))
     block, interior, samples = motion.all_samples()
@@ -616,7 +622,7 @@ def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: 
                                 "CL path", cl_line=int(cl_lines[k])))
         matched[k] = -1
     pieces = _pieces(matched, m_blocks)
-    _unreached(reference, matched, pieces, ends, lines, findings)
+    _unreached(reference, matched, ends, lines, tol, findings)
 
     # deviation at the block ends and the interior samples of feed moves that follow the CL path
     curves = motion.curves
@@ -658,29 +664,31 @@ def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: 
             peak_ratio, int(np.count_nonzero(matched >= 0)))
 
 
-def _unreached(reference: Reference, matched: np.ndarray, pieces: _Pieces, ends: _Poses, lines: np.ndarray,
+def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: np.ndarray, tol: float,
                findings: list[Finding]) -> None:
-    """A finding per CL pose no block end reaches, at the block of its piece whose end is nearest."""
+    """A finding per CL pose no block end reaches, at the block between the reached poses around it
+    whose move (the chord of its ends) passes nearest (the earlier one of equals)."""
     missing = np.flatnonzero(matched < 0)
+    anchors = np.flatnonzero(matched >= 0)
     if missing.size == 0:
         return
-    anchors = np.flatnonzero(matched >= 0)
     i = np.searchsorted(anchors, missing)
-    before = np.where(i > 0, matched[anchors[np.maximum(i - 1, 0)]], -1) if anchors.size else np.full(missing.size,
-                                                                                                       -1)
-    after = np.where(i < anchors.size, matched[anchors[np.minimum(i, anchors.size - 1)]], len(lines) - 1) \
-        if anchors.size else np.full(missing.size, len(lines) - 1)
+    before = matched[anchors[i - 1]] if anchors.size else np.full(missing.size, -1)
+    before = np.where(i > 0, before, -1)
+    after = matched[anchors[np.minimum(i, anchors.size - 1)]] if anchors.size else np.full(missing.size, -1)
+    after = np.where(i < anchors.size, after, len(lines) - 1)
     count = np.clip(after - before, 1, 1000)
     owner = np.repeat(np.arange(missing.size), count)
     block = np.clip(before[owner] + 1 + _ranks(count), 0, len(lines) - 1)
-    distance = np.nan_to_num(np.linalg.norm(ends.tip[block] - reference.tip[missing[owner]], axis=1), nan=np.inf)
-    order = np.lexsort((distance, owner))
+    target = reference.tip[missing[owner]]
+    distance = distance_to_segment(target, ends.tip[np.maximum(block - 1, 0)], ends.tip[block])
+    distance = np.nan_to_num(distance, nan=np.inf)
+    order = np.lexsort((block, distance, owner))
     best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
     for j, k in enumerate(missing):
-        where = block[best[j]]
-        gap = distance[best[j]]
-        findings.append(Finding(int(lines[where]), "reach", f"no block end reaches this CL point (nearest "
-                                f"{gap:.4f} mm away)", cl_line=int(reference.line[k]), value=float(gap)))
+        findings.append(Finding(int(lines[block[best[j]]]), "reach", f"no block end reaches this CL point (the "
+                                f"move passes {distance[best[j]]:.4f} mm from it)", cl_line=int(reference.line[k]),
+                                value=float(distance[best[j]]), limit=tol))
 
 
 def _feed(program: GcodeProgram, reference: Reference, pieces: _Pieces, curves: _Curves, follows: np.ndarray,
