@@ -383,3 +383,15 @@ def test_unreadable_program_is_a_one_line_error(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert result.output.strip().splitlines() == [f"verne-post: error: {path}:3: G3 is not supported: a joint-space "
                                                   f"program uses G0/G1 in absolute distance (G90) without offsets"]
+
+
+def test_tilt_beyond_its_travel(program_text: list[str], cl_path: vp.Toolpath) -> None:
+    moves = _moves(program_text)
+    k = _middle_feed_block(moves)
+    i = moves[k][0]
+    changed = program_text.copy()
+    changed[i] = re.sub(r"A\S+", "A95.00000", program_text[i])
+    found = [f for f in _findings(changed, cl_path) if f.kind == "limit"]
+    assert (found[0].line, found[0].value, found[0].limit) == (i + 1, 95.0, 90.0)  # degrees, as the machine file
+    # the move out of it comes back from 95 degrees: beyond 90 until partway
+    assert [f.line for f in found[1:]] == [moves[k + 1][0] + 1] and 90.0 < found[1].value < 95.0

@@ -153,7 +153,7 @@ def read_gcode(text: str | Iterable[str], source: str = "<program>") -> GcodePro
     state = np.searchsorted(changes, line, side="right")
     nonblank = np.flatnonzero(~blank[:stop])
     last_line = int(nonblank[-1]) + 1 if nonblank.size else 0
-    problems = list(reader.problems)
+    problems = []
     if reader.end_line is None and reader.opened and not reader.closed:
         problems.append((last_line, "the program starts with '%' but has no closing '%'"))
     return _resolve(source, table, line, state, reader, problems, last_line)
@@ -175,7 +175,7 @@ def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, 
     kind = _BYTE_KIND[data]
     if data.size == 0:
         return np.zeros(0, np.int64), np.zeros((0, 7)), np.ones(n_lines, bool), np.zeros(n_lines, bool)
-    blank = np.add.reduceat(kind != _SPACE, np.minimum(starts, len(data) - 1)) == 0
+    blank = ~np.logical_or.reduceat(kind != _SPACE, np.minimum(starts, len(data) - 1))
     blank |= starts == ends
     slow = np.zeros(n_lines, bool)
     slow[np.searchsorted(ends, np.flatnonzero(kind == _OTHER))] = True
@@ -222,7 +222,6 @@ class _Interpreter:
         self.states: list[_State] = [_State()]
         self.change_line: list[int] = []
         self.notes: list[ToolNote] = []
-        self.problems: list[tuple[int, str]] = []
         self.lengths: dict[int, float] = {}
         self.selected = -1
         self.work_offset: tuple[float, float, float] | None = None

@@ -23,15 +23,16 @@ by at most max|t''| h^2 / 8, and the distance to a segment is convex along that 
 largest distance is at most the largest sampled one plus max|t''| h^2 / 8. max|t''| h^2 is
 estimated by the largest second difference of the samples (exact for a quadratic curve; the
 blocks are short, so the third-derivative term is small). Each feed block is first sampled at
-4 intervals; where the estimate shows that more are needed for the sampling error to stay
-below ``SAMPLING_SHARE`` of the tolerance the block is sampled again, densely enough (at most
+``FIRST_INTERVALS`` intervals; where the estimate shows that the sampling error could exceed
+``SAMPLING_SHARE`` of the tolerance, the block is sampled again, densely enough (at most
 ``MAX_INTERVALS``). The same holds for the axis (angles on the unit sphere, chords for small
-angles). The reported deviations include this bound. Rapids: ``RAPID_INTERVALS`` samples for
-travel, reach and margins.
+angles). The reported deviations include this bound. Rapids: ``RAPID_INTERVALS`` intervals
+for travel, reach and margins.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, fields, is_dataclass
@@ -48,11 +49,11 @@ from .machine import Machine
 from .poses import MachinePoses
 from .toolpath import Toolpath
 
-__all__ = ["Finding", "Reference", "Verification", "check_program_text", "verify_program"]
+__all__ = ["Finding", "Reference", "Verification", "verify_blocks", "verify_program"]
 
 DEFAULT_TOL = 0.005  # mm, when neither the caller nor the program header gives one
 DEFAULT_AXIS_TOL = 0.05  # deg
-FIRST_INTERVALS = 4
+FIRST_INTERVALS = 3
 MAX_INTERVALS = 256
 SAMPLING_SHARE = 0.1
 RAPID_INTERVALS = 32
@@ -65,11 +66,11 @@ FEED_SLACK = 0.01
 JOINT_SPEED_SLACK = 0.01
 #: CL candidates per block end when matching (several passes may reach the same point).
 _CANDIDATES = 8
-#: Point-segment pairs evaluated at once (bounds the memory of the deviation measure).
-_PAIR_CHUNK = 1 << 21
+#: Point-segment pairs and poses evaluated at once (bound the memory of a long program).
+_PAIR_CHUNK = 1 << 17
+_POSE_CHUNK = 1 << 15
 
 _JOINT_WORDS = ("slider rho1", "slider rho2", "slider rho3", "tilt theta1", "rotary theta2")
-_WORD_OF = {"X": 0, "Y": 1, "Z": 2, "A": 3, "C": 4}
 
 
 @dataclass(frozen=True)
@@ -186,11 +187,11 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
                      else DEFAULT_AXIS_TOL)
     offset = tuple(work_offset or program.work_offset or machine.work_offset)
     reference = against if isinstance(against, Reference) or against is None else Reference.of(against, offset)
-    return check_program_text(program, machine, reference, tol, axis_tol, offset)
+    return verify_blocks(program, machine, reference, tol, axis_tol, offset)
 
 
-def check_program_text(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
-                       axis_tol: float, work_offset: tuple[float, ...] = (0.0, 0.0, 0.0)) -> Verification:
+def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
+                  axis_tol: float, work_offset: Iterable[float] = (0.0, 0.0, 0.0)) -> Verification:
     """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg)."""
     findings = [] if program.end_line is not None else [
         Finding(program.last_line, "program", "the program ends without M2/M30 (cut off?)")]
@@ -211,6 +212,7 @@ def check_program_text(program: GcodeProgram, machine: Machine, reference: Refer
     if reference is not None:
         tip_dev, axis_dev, feed_ratio, peak_ratio, reached = _against(program, reference, motion, tol,
                                                                       np.radians(axis_tol), findings)
+    x, y, z = work_offset
     unique: dict[tuple[int, str], Finding] = {}
     for finding in findings:  # one per line and kind: the first (worst or earliest) stays
         unique.setdefault((finding.line, finding.kind), finding)
@@ -219,7 +221,7 @@ def check_program_text(program: GcodeProgram, machine: Machine, reference: Refer
         source=program.source, against=None if reference is None else reference.source,
         findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))), blocks=len(program),
         samples=len(block), tol=tol, axis_tol=axis_tol,
-        work_offset=tuple(float(v) for v in work_offset),  # type: ignore[arg-type]
+        work_offset=(float(x), float(y), float(z)),
         tip_deviation=tip_dev, axis_deviation=axis_dev,
         cl_points=None if reference is None else len(reference.tip), cl_points_reached=reached,
         feed_ratio=feed_ratio, peak_feed_ratio=peak_ratio, joint_speed_ratio=speed_ratio,
@@ -283,12 +285,18 @@ class _Poses:
         valid = np.ones(n, bool) if valid is None else valid
         tip, axis, platform = np.full((n, 3), np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan)
         alpha, reachable = np.full(n, np.nan), np.zeros(n, bool)
-        if valid.any():
-            fk = forward_kinematics(machine, joints[valid], tool_length=lengths[valid],
-                                    alpha_guess=None if alpha_guess is None else alpha_guess[valid])
-            tip[valid], axis[valid], alpha[valid], platform[valid] = fk.tip, fk.axis, fk.alpha, fk.platform
-            reachable[valid] = fk.reachable
-        found = pose_margins(machine, joints, platform, alpha, reachable, np.nan_to_num(lengths))
+        margin_parts = []
+        for start in range(0, max(n, 1), _POSE_CHUNK):  # chunks bound the kinematics' temporary arrays
+            rows = slice(start, start + _POSE_CHUNK)
+            use = np.flatnonzero(valid[rows]) + start
+            if use.size:
+                fk = forward_kinematics(machine, joints[use], tool_length=lengths[use],
+                                        alpha_guess=None if alpha_guess is None else alpha_guess[use])
+                tip[use], axis[use], alpha[use], platform[use] = fk.tip, fk.axis, fk.alpha, fk.platform
+                reachable[use] = fk.reachable
+            margin_parts.append(pose_margins(machine, joints[rows], platform[rows], alpha[rows], reachable[rows],
+                                             np.nan_to_num(lengths[rows])))
+        found = _joined(margin_parts)
         return cls(joints, tip, axis, alpha, reachable, found, classify(machine, joints, reachable, found))
 
 
@@ -455,12 +463,14 @@ def _limit_findings(machine: Machine, lines: np.ndarray, interior: np.ndarray, p
         lambda k: "the sliders admit no assembly of the parallel module (out of reach)")
     q = poses.joints
     for j in range(5):
+        shown = q[:, j] if j < 3 else np.degrees(q[:, j])  # mm, deg in the report
+        scale = 1.0 if j < 3 else 180.0 / np.pi
         if np.isfinite(upper[j]):
             add("limit", q[:, j] - upper[j], lambda k, j=j: f"{_JOINT_WORDS[j]} = {_quantity(j, q[k, j])} exceeds "
-                f"max {_quantity(j, upper[j])}", q[:, j], float(upper[j]))
+                f"max {_quantity(j, upper[j])}", shown, float(upper[j] * scale))
         if np.isfinite(lower[j]):
             add("limit", lower[j] - q[:, j], lambda k, j=j: f"{_JOINT_WORDS[j]} = {_quantity(j, q[k, j])} is "
-                f"below min {_quantity(j, lower[j])}", q[:, j], float(lower[j]))
+                f"below min {_quantity(j, lower[j])}", shown, float(lower[j] * scale))
     add("rod_clearance", t.rod_clearance_min - found.rod_clearance,
         lambda k: f"leg I rods {found.rod_clearance[k]:.2f} mm apart (min {t.rod_clearance_min:.2f} mm: rods "
                   f"would cross)", found.rod_clearance, t.rod_clearance_min)
@@ -589,9 +599,10 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
     piece (points of ``blocks``), in chunks of at most _PAIR_CHUNK point-segment pairs."""
     count = np.maximum(pieces.last[blocks] - pieces.first[blocks], 1)
     tip_error, axis_error, nearest = np.empty(len(blocks)), np.empty(len(blocks)), np.empty(len(blocks), np.int64)
-    bounds = np.searchsorted(np.cumsum(count), np.arange(_PAIR_CHUNK, int(count.sum()) + _PAIR_CHUNK, _PAIR_CHUNK))
-    start = 0
-    for stop in np.unique(np.r_[np.minimum(bounds + 1, len(blocks)), len(blocks)]):
+    total = np.cumsum(count)
+    edges = np.r_[0, np.searchsorted(total, np.arange(_PAIR_CHUNK, total[-1] if total.size else 0, _PAIR_CHUNK)),
+                  len(blocks)]
+    for start, stop in itertools.pairwise(edges):
         if stop <= start:
             continue
         rows = np.arange(start, stop)
@@ -603,7 +614,6 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
         tip_error[rows] = distance[best]
         axis_error[rows] = angle_to_arc(axis[rows], reference.axis[a[best]], reference.axis[b[best]])
         nearest[rows] = b[best]
-        start = stop
     return tip_error, axis_error, nearest
 
 
@@ -626,12 +636,10 @@ def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: 
 
     # deviation at the block ends and the interior samples of feed moves that follow the CL path
     curves = motion.curves
-    owner_rapid = reference.rapid
     owner, a, b = pieces.pairs(np.arange(m_blocks))
-    cl_rapid = np.zeros(m_blocks, bool)
-    np.logical_or.at(cl_rapid, owner, owner_rapid[b] & (a != b))
-    cl_feed = np.zeros(m_blocks, bool)
-    np.logical_or.at(cl_feed, owner, ~owner_rapid[b] & (a != b))
+    segment = a != b  # a piece of one pose has no motion of its own
+    cl_rapid = np.bincount(owner, reference.rapid[b] & segment, minlength=m_blocks) > 0
+    cl_feed = np.bincount(owner, ~reference.rapid[b] & segment, minlength=m_blocks) > 0
     cl_feed[0] = False  # the first block comes from wherever the machine stands
     for m in np.flatnonzero(program.rapid & cl_feed):
         findings.append(Finding(int(lines[m]), "motion", "G0 (rapid) where the CL path feeds",
