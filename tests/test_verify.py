@@ -395,3 +395,27 @@ def test_tilt_beyond_its_travel(program_text: list[str], cl_path: vp.Toolpath) -
     assert (found[0].line, found[0].value, found[0].limit) == (i + 1, 95.0, 90.0)  # degrees, as the machine file
     # the move out of it comes back from 95 degrees: beyond 90 until partway
     assert [f.line for f in found[1:]] == [moves[k + 1][0] + 1] and 90.0 < found[1].value < 95.0
+
+
+def test_inverse_time_moves_and_turns_on_the_spot(tmp_path: Path) -> None:
+    """FEDRAT/INVERS,10: the 10 mm move takes 6 s; the turn on the spot that follows runs at the
+    machine's timing.rotary_feed. Faster F words on either are found at their lines."""
+    cl = tmp_path / "it.cls"
+    cl.write_text("UNITS/MM\nMULTAX/ON\nTLDATA/MILL,10,0,80,0,0\nLOAD/TOOL,1\nFEDRAT/MMPM,1000\n"
+                  "GOTO/0,0,50,0,0,1\nFEDRAT/INVERS,10\nGOTO/10,0,50,0,0,1\nGOTO/10,0,50,0.2,0,0.98\nFINI\n")
+    target = tmp_path / "it.nc"
+    assert CliRunner().invoke(main, [str(cl), "-o", str(target), "--quiet"]).exit_code == 0
+    lines = target.read_text().splitlines()
+    feeds = [i for i, line in enumerate(lines) if line.startswith("G1 ")]
+    moves = _moves(lines)
+    tips = _fk([v for _, v, _ in moves], 80.0)
+    # the first feed block covers the whole 10 mm move (its end is on the second CL point)
+    first = feeds[0]
+    assert np.linalg.norm(tips[[i for i, _, _ in moves].index(first)] - [10, 0, 50]) < 1e-3
+    turn = feeds[len(feeds) // 2]  # a block of the turn on the spot
+    toolpath = read_toolpath(cl)
+    for i, factor, cl_line in ((first, 1.5, 8), (turn, 2.0, 9)):
+        changed = lines.copy()
+        changed[i] = re.sub(r"F(\S+)", lambda m, f=factor: f"F{float(m.group(1)) * f:.5f}", lines[i])
+        found = _findings(changed, toolpath)
+        assert [(f.line, f.kind, f.cl_line) for f in found if f.kind != "joint_speed"] == [(i + 1, "feed", cl_line)]

@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -33,6 +33,9 @@ from .errors import InputError, UserError
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import Machine, load_machine
 from .tables import read_table, write_table
+
+if TYPE_CHECKING:
+    from .verify import Verification
 
 
 class _DefaultToPost(click.Group):
@@ -404,7 +407,7 @@ def check_command(cl_file: str, report_path: str | None, max_messages: int, **ch
 # ----------------------------------------------------------------------------- verify
 
 
-def _print_findings(verification: Any, max_messages: int) -> None:
+def _print_findings(verification: Verification, max_messages: int) -> None:
     for f in verification.findings[:max_messages]:
         cl = f" (CL {verification.against}:{f.cl_line})" if f.cl_line is not None else ""
         click.echo(f"verne-post: error: {verification.source}:{f.line}: {f.message}{cl}", err=True)

@@ -447,7 +447,7 @@ def program_text(program: Program, fmt: GcodeFormat | None = None) -> str:
 def with_header_line(text: str, comment: str) -> str:
     """Program ``text`` with ``(comment)`` as the last header line, just before the preamble."""
     at = text.index(PREAMBLE)
-    at = text.rfind("\n", 0, at) + 1  # the start of the preamble line (after its N number, if any)
+    at = text.rfind("\n", 0, at) + 1  # the start of the preamble line, before its N number if any
     return f"{text[:at]}({comment_text(comment)})\n{text[at:]}"
 
 

@@ -15,7 +15,8 @@ that made the joints. Checked, each finding naming the G-code line (and the CL l
   ``axis_tol``); the tip within ``tol`` (mm) and the axis within ``axis_tol`` (degrees) of the
   CL segments the block belongs to (arcs are already expanded into segments by the CL reader,
   within its chordal tolerance), at its end and between; no G0 where the CL path feeds; the
-  tip speed each G1 block implies not above the programmed feed.
+  tip speed each G1 block implies not above the programmed feed (inverse-time CL moves: not
+  done in less than their time; turns on the spot: timing.rotary_feed of the machine file).
 
 Sampling, and why the maximum between samples is bounded: along a block the tip is a smooth
 curve t(f) of the joint fraction f. Between samples h apart it leaves the chord of its samples
@@ -64,6 +65,8 @@ DELTA_TOL = 1e-3
 #: written numbers (block ends to 1e-4 mm, F to its decimals).
 FEED_SLACK = 0.01
 JOINT_SPEED_SLACK = 0.01
+#: mm: a CL move whose tip travels less than this turns on the spot (as the planner's TIP_EPS).
+STILL_TIP = 1e-4
 #: CL candidates per block end when matching (several passes may reach the same point).
 _CANDIDATES = 8
 #: Point-segment pairs and poses evaluated at once (bound the memory of a long program).
@@ -210,8 +213,8 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     tip_dev = axis_dev = feed_ratio = peak_ratio = None
     reached = None
     if reference is not None:
-        tip_dev, axis_dev, feed_ratio, peak_ratio, reached = _against(program, reference, motion, tol,
-                                                                      np.radians(axis_tol), findings)
+        tip_dev, axis_dev, feed_ratio, peak_ratio, reached = _against(program, machine, reference, motion,
+                                                                      tol, np.radians(axis_tol), findings)
     x, y, z = work_offset
     unique: dict[tuple[int, str], Finding] = {}
     for finding in findings:  # one per line and kind: the first (worst or earliest) stays
@@ -525,12 +528,17 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     usable = np.flatnonzero(known & ends.reachable)
     if usable.size == 0 or n == 0:
         return matched
-    distance, index = cKDTree(ends.tip[usable]).query(reference.tip, k=min(_CANDIDATES, usable.size),
-                                                      distance_upper_bound=tol)
+    # tip and axis together (the axis scaled so that axis_tol weighs as much as tol): the block
+    # ends of a rotation on the spot share their tip but not their axis
+    weight = tol / axis_tol
+    distance, index = cKDTree(np.hstack([ends.tip[usable], weight * ends.axis[usable]])).query(
+        np.hstack([reference.tip, weight * reference.axis]), k=min(_CANDIDATES, usable.size),
+        distance_upper_bound=math.sqrt(2) * tol)
     distance, index = distance.reshape(n, -1), index.reshape(n, -1)
     pose, slot = np.nonzero(np.isfinite(distance))
     block = usable[index[pose, slot]]
-    good = _angle(reference.axis[pose], ends.axis[block]) <= axis_tol
+    good = ((np.linalg.norm(reference.tip[pose] - ends.tip[block], axis=1) <= tol)
+            & (_angle(reference.axis[pose], ends.axis[block]) <= axis_tol))
     pose, block, distance = pose[good], block[good], distance[pose[good], slot[good]]
     if pose.size == 0:
         return matched
@@ -593,10 +601,11 @@ def _pieces(matched: np.ndarray, m_blocks: int) -> _Pieces:
     return _Pieces(first, np.maximum(last, first))
 
 
-def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: np.ndarray, axis: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Tip distance (mm), axis angle (rad) and CL pose of the nearest segment of each point's
-    piece (points of ``blocks``), in chunks of at most _PAIR_CHUNK point-segment pairs."""
+def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: np.ndarray, axis: np.ndarray,
+               tol: float, axis_tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Tip distance (mm), axis angle (rad) and end pose of the segment of each point's piece
+    (points of ``blocks``) nearest to it, tip and axis over ``tol`` (mm) and ``axis_tol`` (rad);
+    in chunks of at most _PAIR_CHUNK point-segment pairs."""
     count = np.maximum(pieces.last[blocks] - pieces.first[blocks], 1)
     tip_error, axis_error, nearest = np.empty(len(blocks)), np.empty(len(blocks)), np.empty(len(blocks), np.int64)
     total = np.cumsum(count)
@@ -608,17 +617,18 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
         rows = np.arange(start, stop)
         owner, a, b = pieces.pairs(blocks[rows])
         distance = distance_to_segment(tip[rows][owner], reference.tip[a], reference.tip[b])
+        angle = angle_to_arc(axis[rows][owner], reference.axis[a], reference.axis[b])
+        # the segment nearest in tip and axis together, each over its tolerance
+        cost = distance / tol + angle / axis_tol
         group = np.cumsum(count[rows]) - count[rows]
-        nearest_pair = np.flatnonzero(distance == np.repeat(np.minimum.reduceat(distance, group), count[rows]))
+        nearest_pair = np.flatnonzero(cost == np.repeat(np.minimum.reduceat(cost, group), count[rows]))
         best = nearest_pair[np.r_[True, owner[nearest_pair][1:] != owner[nearest_pair][:-1]]]
-        tip_error[rows] = distance[best]
-        axis_error[rows] = angle_to_arc(axis[rows], reference.axis[a[best]], reference.axis[b[best]])
-        nearest[rows] = b[best]
+        tip_error[rows], axis_error[rows], nearest[rows] = distance[best], angle[best], b[best]
     return tip_error, axis_error, nearest
 
 
-def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: float, axis_tol: float,
-             findings: list[Finding]) -> tuple[float, float, float | None, float | None, int]:
+def _against(program: GcodeProgram, machine: Machine, reference: Reference, motion: _Motion, tol: float,
+             axis_tol: float, findings: list[Finding]) -> tuple[float, float, float | None, float | None, int]:
     """Reach, order, deviation and feed findings; returns the largest tip deviation (mm), axis
     deviation (deg), feed ratio, peak feed ratio within a block and the number of CL points
     reached."""
@@ -652,7 +662,8 @@ def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: 
     point_axis = np.concatenate([ends.axis[end_blocks], curves.samples.axis[inner_follows]])
     ok = np.isfinite(point_tip).all(axis=1)
     point_block, point_tip, point_axis = point_block[ok], point_tip[ok], point_axis[ok]
-    tip_error, axis_error, nearest = _deviation(reference, pieces, point_block, point_tip, point_axis)
+    tip_error, axis_error, nearest = _deviation(reference, pieces, point_block, point_tip, point_axis, tol,
+                                                axis_tol)
     bound_tip, bound_axis = np.zeros(m_blocks), np.zeros(m_blocks)
     bound_tip[curves.moves[follows]] = motion.bound_tip[follows]
     bound_axis[curves.moves[follows]] = motion.bound_axis[follows]
@@ -667,7 +678,7 @@ def _against(program: GcodeProgram, reference: Reference, motion: _Motion, tol: 
                                 f"deg from the CL path (max {np.degrees(axis_tol):g} deg)",
                                 cl_line=int(cl_lines[nearest[k]]), value=float(np.degrees(axis_total[k])),
                                 limit=float(np.degrees(axis_tol))))
-    feed_ratio, peak_ratio = _feed(program, reference, pieces, curves, follows, findings)
+    feed_ratio, peak_ratio = _feed(program, reference, machine, matched, pieces, curves, follows, findings)
     return (float(tip_total.max(initial=0.0)), float(np.degrees(axis_total.max(initial=0.0))), feed_ratio,
             peak_ratio, int(np.count_nonzero(matched >= 0)))
 
@@ -699,34 +710,63 @@ def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: n
                                 value=float(distance[best[j]]), limit=tol))
 
 
-def _feed(program: GcodeProgram, reference: Reference, pieces: _Pieces, curves: _Curves, follows: np.ndarray,
-          findings: list[Finding]) -> tuple[float | None, float | None]:
-    """Tip speed of each timed G1 block (the length of its tip path over its duration) over the
-    programmed feed of its CL segments (the lowest, if several). Returns the largest ratio, and
-    the largest ratio of the fastest sample interval within a block (near the pole the joint
-    interpolation moves the tip unevenly within a block: reported, not a finding)."""
+def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched: np.ndarray, pieces: _Pieces,
+          curves: _Curves, follows: np.ndarray, findings: list[Finding]) -> tuple[float | None, float | None]:
+    """Programmed feeds against the timed G1 blocks, as speed ratios (> 1: too fast).
+
+    - CL moves per minute: the tip speed of each block (the length of its tip path over its
+      duration) over the programmed feed of its CL segments (the lowest, if several);
+    - inverse-time CL moves (FEDRAT/INVERS) give a duration: the blocks from the one reaching
+      the move's start to the one reaching its end take no less;
+    - CL moves where the tip stands still: the speed of the rotary joints (theta1, theta2
+      together) of each block, at most the machine's ``timing.rotary_feed``.
+
+    Returns the largest ratio, and the largest over the fastest sample interval within a block
+    (near the pole the joint interpolation moves the tip unevenly within a block: reported, not
+    a finding).
+    """
     moves = curves.moves
     timed = follows & (program.duration[moves] > 0)
-    if not timed.any():
-        return None, None
     step = np.linalg.norm(np.diff(curves.tip, axis=0), axis=1)  # consecutive points; across moves dropped
     within = np.ones(len(step), bool)
     within[(curves.start + curves.n)[:-1]] = False
     step = np.where(within, step, 0.0)
     minutes = program.duration[moves] / 60.0
-    speed = np.add.reduceat(step, curves.start) / minutes  # mm/min
-    peak = np.maximum.reduceat(step, curves.start) * curves.n / minutes
+    speed = np.add.reduceat(step, curves.start) / minutes if len(step) else np.zeros(0)  # mm/min
+    peak = np.maximum.reduceat(step, curves.start) * curves.n / minutes if len(step) else np.zeros(0)
     owner, a, b = pieces.pairs(moves)
-    programmed = np.where(reference.inverse_time[b], np.linalg.norm(reference.tip[b] - reference.tip[a], axis=1)
-                          * reference.feed[b], reference.feed[b])
+    travel = np.linalg.norm(reference.tip[b] - reference.tip[a], axis=1) >= STILL_TIP
+    per_minute = np.where(travel & ~reference.inverse_time[b], reference.feed[b], np.nan)
     lowest = np.full(len(moves), np.inf)
-    np.fmin.at(lowest, owner, np.where(a == b, np.nan, programmed))
+    np.fmin.at(lowest, owner, per_minute)
+    lowest[np.bincount(owner, travel & reference.inverse_time[b], minlength=len(moves)) > 0] = np.inf
+    still = (np.bincount(owner, travel, minlength=len(moves)) == 0) & (np.bincount(owner, a != b,
+                                                                                   minlength=len(moves)) > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(timed & np.isfinite(lowest), speed / lowest, np.nan)
         peak_ratio = np.where(timed & np.isfinite(lowest), peak / lowest, np.nan)
+        turn = np.degrees(np.linalg.norm(program.joints[moves, 3:] - program.joints[moves - 1, 3:], axis=1))
+        rotary_ratio = np.where(timed & still, turn / minutes / machine.timing.rotary_feed, np.nan)
     for i in np.flatnonzero(ratio > 1 + FEED_SLACK):
         m = moves[i]
         findings.append(Finding(int(program.line[m]), "feed", f"tool tip at {speed[i]:.1f} mm/min, programmed "
                                 f"{lowest[i]:.1f} mm/min", cl_line=int(reference.line[pieces.last[m]]),
                                 value=float(ratio[i]), limit=1.0))
-    return _nanmax(ratio), _nanmax(peak_ratio)
+    for i in np.flatnonzero(rotary_ratio > 1 + FEED_SLACK):
+        m = moves[i]
+        findings.append(Finding(int(program.line[m]), "feed", f"the table turns at {turn[i] / minutes[i]:.1f} "
+                                f"deg/min with the tip standing still (max {machine.timing.rotary_feed:g} deg/min, "
+                                f"timing.rotary_feed)", cl_line=int(reference.line[pieces.last[m]]),
+                                value=float(rotary_ratio[i]), limit=1.0))
+    # inverse time: whole CL moves between two reached poses
+    k = np.flatnonzero(reference.inverse_time[1:] & (matched[1:] >= 0) & (matched[:-1] >= 0)
+                       & (np.linalg.norm(np.diff(reference.tip, axis=0), axis=1) >= STILL_TIP)) + 1
+    elapsed = np.r_[0.0, np.cumsum(np.where(program.rapid, 0.0, np.nan_to_num(program.duration)))]
+    taken = elapsed[matched[k] + 1] - elapsed[matched[k - 1] + 1]
+    with np.errstate(divide="ignore"):
+        inverse_ratio = 60.0 / reference.feed[k] / taken
+    for j in np.flatnonzero(inverse_ratio > 1 + FEED_SLACK):
+        findings.append(Finding(int(program.line[matched[k[j]]]), "feed", f"the move takes {taken[j]:.4f} s, "
+                                f"programmed {60.0 / reference.feed[k[j]]:.4f} s (inverse time)",
+                                cl_line=int(reference.line[k[j]]), value=float(inverse_ratio[j]), limit=1.0))
+    return _nanmax(np.r_[ratio, inverse_ratio, rotary_ratio]), _nanmax(peak_ratio)
