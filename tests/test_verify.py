@@ -419,3 +419,14 @@ def test_inverse_time_moves_and_turns_on_the_spot(tmp_path: Path) -> None:
         changed[i] = re.sub(r"F(\S+)", lambda m, f=factor: f"F{float(m.group(1)) * f:.5f}", lines[i])
         found = _findings(changed, toolpath)
         assert [(f.line, f.kind, f.cl_line) for f in found if f.kind != "joint_speed"] == [(i + 1, "feed", cl_line)]
+
+
+def test_tool_length_from_the_command_line_is_in_the_program(tmp_path: Path) -> None:
+    """Poses with no tool in the file and --tool-length: the program says which length its
+    joints are for (DELTA = spindle nose 495.8 + 50 mm), so that it can be verified from its text."""
+    source = tmp_path / "poses.csv"
+    source.write_text("x,y,z,i,j,k,feed\n0,0,50,0,0,1,1000\n10,0,50,0.1,0,0.995,1000\n")
+    target = tmp_path / "p.nc"
+    result = CliRunner().invoke(main, [str(source), "-o", str(target), "--tool-length", "50", "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "(TOOL 0 LENGTH 50.0000 DELTA 545.8000)" in target.read_text().splitlines()

@@ -214,6 +214,9 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
 def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
              options: PostOptions) -> Program:
     events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
+    if poses.tools and poses.tools[0].source == "--tool-length" and poses.tools[0].number == 0:
+        # motion before any tool change: the program still says which tool length its joints are for
+        events.insert(0, ToolChange(0, poses.tools[0].line, 0, poses.tools[0].length))
     offset = machine.work_offset if options.work_offset is None else options.work_offset
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (

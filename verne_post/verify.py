@@ -705,9 +705,10 @@ def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: n
     order = np.lexsort((block, distance, owner))
     best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
     for j, k in enumerate(missing):
-        findings.append(Finding(int(lines[block[best[j]]]), "reach", f"no block end reaches this CL point (the "
-                                f"move passes {distance[best[j]]:.4f} mm from it)", cl_line=int(reference.line[k]),
-                                value=float(distance[best[j]]), limit=tol))
+        gap = float(distance[best[j]])
+        near = f" (the move passes {gap:.4f} mm from it)" if math.isfinite(gap) else ""
+        findings.append(Finding(int(lines[block[best[j]]]), "reach", "no block end reaches this CL point" + near,
+                                cl_line=int(reference.line[k]), value=gap, limit=tol))
 
 
 def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched: np.ndarray, pieces: _Pieces,
