@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -33,6 +33,9 @@ from .errors import InputError, UserError
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import Machine, load_machine
 from .tables import read_table, write_table
+
+if TYPE_CHECKING:
+    from .verify import Verification
 
 
 class _DefaultToPost(click.Group):
@@ -97,6 +100,7 @@ def main() -> None:
     \b
     verne-post part.cls -o part.nc        postprocess (same as 'verne-post post ...')
     verne-post check part.cls             everything but writing the program
+    verne-post verify part.nc [--against part.cls]   check a G-code program
     verne-post ik / fk ...                kinematics of single poses or CSV files
     """
 
@@ -369,13 +373,18 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
               help="Output format (default: from the output file's suffix).")
 @click.option("--period", type=float, default=0.001, show_default=True,
               help="Timed CSV sample period in s; 0 gives one row per block end.")
+@click.option("--no-verify", is_flag=True,
+              help="Skip reading the G-code back and verifying it with the forward kinematics before writing.")
 @_post_options
 @user_errors
-def post_command(cl_file: str, output: str | None, output_format: str | None, period: float,
+def post_command(cl_file: str, output: str | None, output_format: str | None, period: float, no_verify: bool,
                  report_path: str | None, max_messages: int, **choices: Any) -> None:
-    """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code or a timed CSV."""
-    from .gcode import write_program
-    from .pipeline import gcode_format
+    """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code or a timed CSV.
+
+    The G-code is verified before it is written (see 'verne-post verify'): a program that fails
+    is not written (exit 3); one that passes carries the certified figures in its header.
+    """
+    from .pipeline import write_gcode
     from .trajectory import write_timed_csv
 
     target = output or str(Path(cl_file).with_suffix(".nc"))
@@ -391,7 +400,11 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
         write_timed_csv(target, machine, result.schedule, result.poses.tool_length[blocks.pose],
                         result.poses.line[blocks.pose], period)
     else:
-        write_program(result.program, gcode_format(machine), target)
+        verification = write_gcode(result, machine, options, target, verify=not no_verify)
+        if verification is not None and not verification.ok:
+            _print_findings(verification, max_messages)
+            click.echo(f"verne-post: {target}: the program fails its verification: nothing written", err=True)
+            sys.exit(3)
 
 
 @main.command("check")
@@ -442,3 +455,65 @@ def toolpath_command(cl_file: str, output: str | None, units: str | None, arc_to
              "k": tp.axis[:, 2], "feed": feed, "motion": np.array(MOTION_KINDS)[motion], "line": tp.line}
     _write_csv(table, output, {"x": "%.6f", "y": "%.6f", "z": "%.6f", "i": "%.9f", "j": "%.9f", "k": "%.9f",
                                "feed": "%s", "motion": "%s", "line": "%d"})
+
+
+# ----------------------------------------------------------------------------- verify
+
+
+def _print_findings(verification: Verification, max_messages: int) -> None:
+    for f in verification.findings[:max_messages]:
+        cl = f" (CL {verification.against}:{f.cl_line})" if f.cl_line is not None else ""
+        click.echo(f"verne-post: error: {verification.source}:{f.line}: {f.message}{cl}", err=True)
+    if len(verification.findings) > max_messages:
+        click.echo(f"verne-post: ... and {len(verification.findings) - max_messages} more findings", err=True)
+
+
+@main.command("verify")
+@click.argument("program", metavar="PART.nc", type=click.Path(dir_okay=False))
+@click.option("--against", "cl_file", type=click.Path(dir_okay=False),
+              help="The CL file (APT/CLSF, or a CSV of poses) the program must follow.")
+@machine_option
+@click.option("--work-offset", nargs=3, type=float, default=None,
+              help="Part zero X Y Z in the table frame, mm (default: the program header's, else the machine's).")
+@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
+@click.option("--tol", type=float, default=None,
+              help="Tool tip deviation allowed, mm (default: the program header's, else 0.005).")
+@click.option("--axis-tol", type=float, default=None,
+              help="Tool axis deviation allowed, degrees (default: the program header's, else 0.05).")
+@click.option("--arc-tol", type=float, default=0.001, show_default=True,
+              help="Chordal deviation of CIRCLE arcs expanded into CL points, mm.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the findings as JSON.")
+@click.option("--quiet", "-q", is_flag=True, help="Nothing on stderr but the findings.")
+@click.option("--max-messages", type=int, default=20, show_default=True, help="Findings printed before the count.")
+@_reader_option_group
+@user_errors
+def verify_command(program: str, cl_file: str | None, machine_path: str | None,
+                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float | None,
+                   axis_tol: float | None, arc_tol: float, report_path: str | None, quiet: bool,
+                   max_messages: int, arc_direction: str | None, frame: str | None) -> None:
+    """Verify a joint-space G-code program: limits and margins along the motion, and with
+    --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
+    from .cl import read_toolpath
+    from .tables import write_json
+    from .verify import verify_program
+
+    if min(v for v in (tol, axis_tol, arc_tol) if v is not None) <= 0:
+        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
+    machine = load_machine(machine_path)
+    try:
+        text = Path(program).read_text(encoding="utf-8", errors="replace")
+    except OSError as error:
+        raise InputError(f"cannot read the program: {error.strerror}", program) from None
+    against = None if cl_file is None else read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol,
+                                                         arc_direction=arc_direction, frame=frame)
+    verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
+                                  tol=tol, axis_tol=axis_tol)
+    if report_path:
+        write_json(report_path, verification.report())
+    if not verification.ok:
+        _print_findings(verification, max_messages)
+        click.echo(f"verne-post: {program}: {len(verification.findings)} finding(s)", err=True)
+        sys.exit(3)
+    if not quiet:
+        click.echo(f"verne-post: {program}: {verification.certificate().lower()} ({verification.blocks} blocks, "
+                   f"{verification.samples} poses checked)", err=True)

@@ -51,7 +51,10 @@ __all__ = [
     "Program",
     "comment_text",
     "format_program",
+    "program_text",
+    "with_header_line",
     "write_program",
+    "write_text",
 ]
 
 #: Modal preamble: mm, absolute, XY plane, no cutter compensation, no tool length offset (the
@@ -438,6 +441,25 @@ def format_program(program: Program, fmt: GcodeFormat | None = None) -> Iterator
             yield from piece[:-1].split("\n")
 
     return lines()
+
+
+def program_text(program: Program, fmt: GcodeFormat | None = None) -> str:
+    """The whole G-code of ``program`` as one string (lines end in ``\\n``); raises like
+    :func:`format_program`."""
+    return "".join(_pieces(program, fmt or GcodeFormat()))
+
+
+def with_header_line(text: str, comment: str) -> str:
+    """Program ``text`` with ``(comment)`` as the last header line, just before the preamble."""
+    at = text.index(PREAMBLE)
+    at = text.rfind("\n", 0, at) + 1  # the start of the preamble line, before its N number if any
+    return f"{text[:at]}({comment_text(comment)})\n{text[at:]}"
+
+
+def write_text(text: str, path: str | os.PathLike[str]) -> None:
+    """Write program ``text`` to ``path`` atomically (see :func:`write_program`)."""
+    with atomic_write(path) as handle:
+        handle.write(text)
 
 
 def write_program(program: Program, fmt: GcodeFormat | None, path: str | os.PathLike[str]) -> None:

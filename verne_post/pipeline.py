@@ -20,13 +20,14 @@ from .api import JOINT_NAMES
 from .branch import PathIK, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
-from .gcode import GcodeFormat, Program
+from .gcode import GcodeFormat, Program, program_text, with_header_line, write_program, write_text
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
 from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import Dwell, ToolChange
+from .verify import Reference, Verification, verify_program
 
 
 @dataclass(frozen=True)
@@ -218,6 +219,9 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
 def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
              options: PostOptions) -> Program:
     events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
+    if poses.tools and poses.tools[0].source == "--tool-length" and poses.tools[0].number == 0:
+        # motion before any tool change: the program still says which tool length its joints are for
+        events.insert(0, ToolChange(0, poses.tools[0].line, 0, poses.tools[0].length))
     offset = machine.work_offset if options.work_offset is None else options.work_offset
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (
@@ -242,9 +246,30 @@ _TIME_BASIS = {True: "PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMI
                False: "PROGRAMMED FEEDS AND JOINT VELOCITY LIMITS ONLY"}
 
 
+def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path: str | os.PathLike[str],
+                verify: bool = True) -> Verification | None:
+    """Write the program of ``result`` as G-code to ``path`` (atomically).
+
+    With ``verify`` the program text is first read back and verified against the CL path with
+    the forward kinematics (:mod:`verne_post.verify`); only a program that passes is written,
+    with the certified figures as a header line. Returns the verification (None without).
+    """
+    fmt = gcode_format(machine)
+    if not verify:
+        write_program(result.program, fmt, path)
+        return None
+    text = program_text(result.program, fmt)
+    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    verification = verify_program(text, machine, source=str(path), against=Reference.of(result.poses),
+                                  work_offset=offset, tol=options.tol, axis_tol=options.axis_tol)
+    if verification.ok:
+        write_text(with_header_line(text, verification.certificate()), path)
+    return verification
+
+
 def gcode_format(machine: Machine) -> GcodeFormat:
     g = machine.gcode
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
-__all__ = ["PostOptions", "PostResult", "block_durations", "feed_speed", "gcode_format", "postprocess"]
+__all__ = ["PostOptions", "PostResult", "block_durations", "feed_speed", "gcode_format", "postprocess", "write_gcode"]

@@ -1,0 +1,381 @@
+"""Read a joint-space RS-274 program the way the VERNE controller (LinuxCNC) runs it.
+
+Independent of the writer (``gcode.py``): any plain RS-274 with the words this machine uses is
+accepted, whoever wrote it. ``X Y Z`` are the sliders rho1..3 (mm, or inch under G20), ``A`` the
+tilt theta1 and ``C`` the rotary theta2 (degrees); G0/G1 (modal), G93/G94, F, S, T, M codes,
+N numbers, ``( )`` and ``;`` comments, spaces anywhere, any letter case, blank lines, ``%``
+demarcation. The ``(TOOL n LENGTH l DELTA d)`` comment gives the length (mm) of tool n, and the
+header comments ``(WORK OFFSET x y z MM ...)`` and ``(TOLERANCE t MM a DEG ...)`` what the
+program was made for. Anything this reader cannot interpret exactly (arcs, incremental
+distances, tool length offsets, parameters, expressions, other axes) is an
+:class:`~verne_post.errors.InputError` naming the line.
+
+Semantics follow the LinuxCNC documentation: a block's feed mode is set before its F word,
+motion comes after tool change, M2/M30 end the program after the block's motion and nothing
+after them runs; G94 resets the feed rate to zero; in G93 every G1 needs its own F. Block
+durations (s): G93 ``60 / F``; G94 the XYZ length over F, or the AC length (degrees) over F when
+X, Y and Z do not move (the RS-274/NGC feed rule).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["GcodeProgram", "ToolNote", "read_gcode"]
+
+AXES = "XYZAC"
+MM_PER_INCH = 25.4
+
+_NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)"
+_WORD = re.compile(rf"([A-Z])({_NUMBER})")
+_BLOCK = re.compile(rf"(?:[A-Z]{_NUMBER})*")
+# A parenthesised comment, or a ";" comment to the end of the line, whichever comes first.
+_COMMENT = re.compile(r"\(([^()]*)\)|;.*")
+_TOOL_NOTE = re.compile(rf"^\s*TOOL\s+(\d+)\s+LENGTH\s+({_NUMBER})\s+DELTA\s+({_NUMBER})\s*$", re.IGNORECASE)
+_WORK_OFFSET = re.compile(rf"^\s*WORK\s+OFFSET\s+({_NUMBER})\s+({_NUMBER})\s+({_NUMBER})\b", re.IGNORECASE)
+_TOLERANCE = re.compile(rf"^\s*TOLERANCE\s+({_NUMBER})\s+MM\s+({_NUMBER})\s+DEG\b", re.IGNORECASE)
+
+# G codes (tenths) that change nothing this reader needs beyond what it tracks: plane, cutter
+# compensation off, tool length offset off, canned cycle off, G54 (no offset in joint space),
+# path control modes, absolute distance.
+_HARMLESS_G = {170, 180, 190, 400, 490, 540, 610, 611, 640, 800, 900}
+@dataclass(frozen=True)
+class ToolNote:
+    """A ``(TOOL n LENGTH l DELTA d)`` comment: G-code line, tool, length and Delta (mm)."""
+
+    line: int
+    tool: int
+    length: float
+    delta: float
+
+
+@dataclass(frozen=True)
+class GcodeProgram:
+    """The motion blocks of a program as the controller runs them (M blocks).
+
+    - ``joints`` (M, 5): end of each block: rho1..3 in mm, theta1, theta2 in radians (NaN for an
+      axis never programmed so far).
+    - ``rapid`` (M,): G0; ``inverse_time`` (M,): G93 in force.
+    - ``feed`` (M,): F in force: 1/min under G93, mm/min (deg/min for rotary-only moves) under
+      G94; NaN where the controller has none (G93 block without F, G94 before any F).
+    - ``duration`` (M,) s: how long the controller takes for a G1 block at its F (NaN on rapids,
+      without a feed, or for a first block whose start is unknown).
+    - ``line`` (M,): 1-based line of each block in the file.
+    - ``tool`` (M,): tool in the spindle (-1 none); ``tool_length`` (M,) mm from the TOOL
+      comment of that tool in force, NaN if none.
+    - ``work_offset`` (mm) and ``tolerance`` (mm, deg) from the header, if it gives them.
+    - ``end_line``: line of M2/M30, None if the program never ends; ``last_line``: the last
+      non-blank line read.
+    - ``problems``: (line, reason) for what the controller would refuse while running.
+    """
+
+    source: str
+    joints: np.ndarray
+    rapid: np.ndarray
+    inverse_time: np.ndarray
+    feed: np.ndarray
+    duration: np.ndarray
+    line: np.ndarray
+    tool: np.ndarray
+    tool_length: np.ndarray
+    tool_notes: tuple[ToolNote, ...]
+    work_offset: tuple[float, float, float] | None
+    tolerance: tuple[float, float] | None
+    end_line: int | None
+    last_line: int
+    problems: tuple[tuple[int, str], ...]
+
+    def __len__(self) -> int:
+        return len(self.line)
+
+
+_LETTERS_ALLOWED = set("NGMXYZACFSTP")
+_COLUMNS = "GXYZACF"  # the words of a row: motion mode, axes, feed
+_COLUMN_OF = np.full(256, 7, np.int64)
+_COLUMN_OF[np.frombuffer(_COLUMNS.encode(), np.uint8)] = np.arange(len(_COLUMNS))
+# Byte classes for the fast route: anything else sends the line down the word-by-word route.
+_OTHER, _SPACE, _DIGITS, _LETTER = 0, 1, 2, 3
+_BYTE_KIND = np.zeros(256, np.uint8)
+_BYTE_KIND[np.frombuffer(b" \t\n", np.uint8)] = _SPACE
+_BYTE_KIND[np.frombuffer(b"0123456789.+-", np.uint8)] = _DIGITS
+_BYTE_KIND[np.frombuffer(b"NGXYZACF", np.uint8)] = _LETTER
+
+
+def _code(value: str) -> int:
+    """G/M number in tenths (G61.1 -> 611), the way LinuxCNC tells decimal codes apart."""
+    return round(float(value) * 10)
+
+
+@dataclass(frozen=True)
+class _State:
+    """Modal state that only the word-by-word route changes, shared by the blocks it applies to."""
+
+    scale: float = 1.0  # mm per program length unit (G20 / G21)
+    inverse_time: bool = False
+    feed_epoch: int = 0  # counts G93/G94 words: an F stays in force only within one epoch
+    tool: int = -1  # tool in the spindle
+    tool_length: float = np.nan  # mm, from its TOOL comment
+
+
+def read_gcode(text: str | Iterable[str], source: str = "<program>") -> GcodeProgram:
+    """Read program text (one string, or its lines) into motion blocks; see the module docstring.
+
+    Lines of only N, G0/G1, X Y Z A C and F words (nearly all of a program) are tokenised and
+    their numbers parsed with numpy, all at once; every other line goes word by word through
+    :class:`_Interpreter`, in order. Positions, motion modes and feeds are then resolved for all
+    blocks together.
+    """
+    if not isinstance(text, str):
+        text = "\n".join(text)
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    lines = text.split("\n")
+    fast_line, fast_rows, blank, slow = _fast_rows(np.frombuffer(text.encode("utf-8", "replace"), np.uint8),
+                                                   len(lines))
+    first = int(np.argmax(~blank)) if (~blank).any() else len(lines)
+    reader = _Interpreter(source, opened_at=first)
+    for k in np.flatnonzero(slow):
+        if not reader.read(int(k) + 1, lines[k]):
+            break
+    stop = reader.stop_line or len(lines)
+    keep = fast_line + 1 <= stop
+    line = np.concatenate([fast_line[keep] + 1, np.asarray(reader.row_line, dtype=np.int64)])
+    table = np.concatenate([fast_rows[keep], np.asarray(reader.rows, dtype=float).reshape(-1, 7)])
+    order = np.argsort(line, kind="stable")
+    line, table = line[order], table[order]
+    # the state of a block is the one left by the last word-by-word line before it
+    changes = np.asarray(reader.change_line, dtype=np.int64)
+    state = np.searchsorted(changes, line, side="right")
+    nonblank = np.flatnonzero(~blank[:stop])
+    last_line = int(nonblank[-1]) + 1 if nonblank.size else 0
+    problems = []
+    if reader.end_line is None and reader.opened and not reader.closed:
+        problems.append((last_line, "the program starts with '%' but has no closing '%'"))
+    return _resolve(source, table, line, state, reader, problems, last_line)
+
+
+def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Lines made only of N, G0/G1, X Y Z A C and F words, read from the text's bytes at once.
+
+    Returns the 0-based indices of those with a G, axis or F word, their rows (G, X, Y, Z, A, C,
+    F; NaN where a word is absent), and per-line masks of blank lines and of lines left over for
+    the word-by-word route (comments, other letters, lower case, a space after a letter, a word
+    twice, G other than 0/1), which also reports what is wrong with a line. Letters become
+    spaces and numpy parses the numbers; if their count is not one per letter (a malformed
+    number), every line is left over.
+    """
+    ends = np.flatnonzero(data == 10)  # line k is data[starts[k]:ends[k]]
+    starts = np.r_[0, ends + 1]
+    ends = np.r_[ends, len(data)]
+    kind = _BYTE_KIND[data]
+    if data.size == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 7)), np.ones(n_lines, bool), np.zeros(n_lines, bool)
+    blank = ~np.logical_or.reduceat(kind != _SPACE, np.minimum(starts, len(data) - 1))
+    blank |= starts == ends
+    slow = np.zeros(n_lines, bool)
+    slow[np.searchsorted(ends, np.flatnonzero(kind == _OTHER))] = True
+    letters = np.flatnonzero(kind == _LETTER)
+    attached = _BYTE_KIND[data[np.minimum(letters + 1, len(data) - 1)]] == _DIGITS
+    slow[np.searchsorted(ends, letters[~attached | (letters + 1 == len(data))])] = True
+    letters = letters[~slow[np.searchsorted(ends, letters)]]
+    numbers = data.copy()
+    numbers[letters] = 32
+    for k in np.flatnonzero(slow):
+        numbers[starts[k]:ends[k]] = 32
+    try:
+        values = np.fromstring(numbers.tobytes(), sep=" ")
+    except ValueError:
+        values = np.zeros(0)
+    if values.size != letters.size:
+        return np.zeros(0, np.int64), np.zeros((0, 7)), blank, ~blank
+    word, word_line = data[letters], np.searchsorted(ends, letters)
+    first = np.r_[True, word_line[1:] != word_line[:-1]]
+    row = np.cumsum(first) - 1
+    cell = row * 8 + _COLUMN_OF[word]  # N words have their own column 7
+    twice = np.bincount(cell, minlength=8 * (row[-1] + 1) if row.size else 0) > 1
+    slow[word_line[twice[cell]]] = True  # a word twice in a block
+    slow[word_line[(word == ord("G")) & (values != 0) & (values != 1)]] = True
+    ok = ~slow[word_line] & (word != ord("N"))
+    lines_with_words, row = np.unique(word_line[ok], return_inverse=True)
+    rows = np.full((lines_with_words.size, 7), np.nan)
+    rows[row, _COLUMN_OF[word[ok]]] = values[ok]
+    return lines_with_words, rows, blank, slow & ~blank
+
+
+class _Interpreter:
+    """The word-by-word route: comments, M/T/S words, G codes other than G0/G1, any spacing/case.
+
+    ``read`` takes one line (1-based number) and returns False once the program has ended
+    (M2/M30, or a closing '%'). ``states[i]`` is the modal state after ``change_line[i - 1]``.
+    """
+
+    def __init__(self, source: str, opened_at: int) -> None:
+        self.source = source
+        self.first_line = opened_at + 1
+        self.rows: list[list[float]] = []
+        self.row_line: list[int] = []
+        self.states: list[_State] = [_State()]
+        self.change_line: list[int] = []
+        self.notes: list[ToolNote] = []
+        self.lengths: dict[int, float] = {}
+        self.selected = -1
+        self.work_offset: tuple[float, float, float] | None = None
+        self.tolerance: tuple[float, float] | None = None
+        self.end_line: int | None = None
+        self.stop_line: int | None = None
+        self.opened = self.closed = False
+
+    def fail(self, number: int, reason: str) -> InputError:
+        return InputError(reason, self.source, number)
+
+    def read(self, number: int, raw: str) -> bool:
+        text = raw.strip()
+        state = self.states[-1]
+        if text == "%":
+            if number == self.first_line:
+                self.opened = True
+                return True
+            self.closed = True
+            self.stop_line = number
+            return False
+        code = text
+        if "(" in text or ")" in text or ";" in text:
+            comments: list[str] = []
+            code = _COMMENT.sub(lambda match: comments.append(match.group(1) or "") or "", text)
+            if "(" in code or ")" in code:
+                raise self.fail(number, "unbalanced or nested parenthesis in a comment")
+            for comment in comments:
+                state = self._comment(number, comment, state)
+        code = "".join(code.split()).upper()
+        if code.startswith("/"):
+            raise self.fail(number, "block delete '/' is not supported: whether the block runs depends on a switch")
+        if not _BLOCK.fullmatch(code):
+            bad = _BLOCK.match(code)
+            rest = code[bad.end():] if bad else code
+            raise self.fail(number, f"cannot read '{rest[:20]}': only plain words (letter and number) are supported")
+        g_codes, m_codes, values, unknown = [], [], {}, []
+        for letter, value in _WORD.findall(code):
+            if letter == "G":
+                g_codes.append(_code(value))
+            elif letter == "M":
+                m_codes.append(_code(value))
+            elif letter not in _LETTERS_ALLOWED:
+                unknown.append(letter + value)
+            elif letter in values:
+                raise self.fail(number, f"two {letter} words in one block")
+            else:
+                values[letter] = float(value)
+        for g in g_codes:
+            if g in (0, 10):
+                values["G"] = g / 10
+            elif g in (930, 940):  # LinuxCNC also sets the feed rate to zero on every G94
+                state = replace(state, inverse_time=g == 930, feed_epoch=state.feed_epoch + 1)
+            elif g in (200, 210):
+                state = replace(state, scale=MM_PER_INCH if g == 200 else 1.0)
+            elif g == 40:
+                if "P" not in values:
+                    raise self.fail(number, "G4 dwell without P")
+            elif g not in _HARMLESS_G:
+                raise self.fail(number, f"G{g / 10:g} is not supported: a joint-space program uses G0/G1 in "
+                                        f"absolute distance (G90) without offsets")
+        if unknown:  # after the G codes: "G2 is not supported" says more than "I1"
+            raise self.fail(number, f"word {unknown[0]}: the VERNE controller has no such word here (axes X Y Z "
+                                    f"A C; G0/G1 motion)")
+        if "T" in values:
+            self.selected = int(values["T"])
+        if 60 in m_codes:
+            state = replace(state, tool=self.selected, tool_length=self.lengths.get(self.selected, np.nan))
+        if state is not self.states[-1]:
+            self.states.append(state)
+            self.change_line.append(number)
+        row = [values.get(letter, np.nan) for letter in _COLUMNS]
+        if not all(np.isnan(row)):
+            self.rows.append(row)
+            self.row_line.append(number)
+        if 20 in m_codes or 300 in m_codes:
+            self.end_line = self.stop_line = number
+            return False
+        return True
+
+    def _comment(self, number: int, comment: str, state: _State) -> _State:
+        """Tool lengths and the header's work offset and tolerances."""
+        note = _TOOL_NOTE.match(comment)
+        if note:
+            tool = int(note.group(1))
+            self.notes.append(ToolNote(number, tool, float(note.group(2)), float(note.group(3))))
+            self.lengths[tool] = self.notes[-1].length
+            if tool == state.tool or tool == 0:  # tool 0: tool data without a number, for the spindle's tool
+                return replace(state, tool=tool, tool_length=self.notes[-1].length)
+        elif self.work_offset is None and (match := _WORK_OFFSET.match(comment)):
+            self.work_offset = (float(match.group(1)), float(match.group(2)), float(match.group(3)))
+        elif self.tolerance is None and (match := _TOLERANCE.match(comment)):
+            self.tolerance = (float(match.group(1)), float(match.group(2)))
+        return state
+
+
+def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray, reader: _Interpreter,
+             problems: list[tuple[int, str]], last_line: int) -> GcodeProgram:
+    """Modal positions, motion modes and feeds of all rows at once (``state``: index into
+    ``reader.states`` per row); keep the moves."""
+    n = len(table)
+
+    def of_state(name: str, dtype: type) -> np.ndarray:
+        return np.array([getattr(s, name) for s in reader.states], dtype=dtype)[state]
+
+    scale, inverse_time, epoch = of_state("scale", float), of_state("inverse_time", bool), of_state("feed_epoch", int)
+    everywhere = np.zeros(n, np.int64)
+    axes = np.any(~np.isnan(table[:, 1:6]), axis=1)
+    moves = axes | ~np.isnan(table[:, 0])  # a G0/G1 word alone is a move of length zero (as LinuxCNC does)
+    motion = _last_given(table[:, 0], everywhere)
+    orphan = axes & np.isnan(motion)
+    if orphan.any():
+        raise InputError("axis words without a motion mode (G0 or G1)", source, int(line[np.argmax(orphan)]))
+    position = table[:, 1:6].copy()
+    position[:, :3] *= scale[:, None]
+    position = np.column_stack([_last_given(position[:, k], everywhere) for k in range(5)])
+    # G93: the F word is not modal; G94: the last F since the last G93/G94 word.
+    feed = np.where(inverse_time, table[:, 6], _last_given(table[:, 6], epoch))
+    rapid = motion == 0
+    feed[rapid] = np.nan
+    keep = np.flatnonzero(moves)
+    for k in keep[~rapid[keep] & ~(feed[keep] > 0)]:
+        problems.append((int(line[k]), "G1 in inverse time (G93) without an F word" if inverse_time[k] else
+                         "G1 with no feed rate (no F since the start or since G94)" if np.isnan(feed[k]) else
+                         f"G1 with feed rate F{feed[k]:g}"))
+    joints = position[keep]
+    duration = _durations(joints, scale[keep], rapid[keep], inverse_time[keep], feed[keep])
+    joints[:, 3:] = np.radians(joints[:, 3:])
+    return GcodeProgram(
+        source=source, joints=joints, rapid=rapid[keep], inverse_time=inverse_time[keep], feed=feed[keep],
+        duration=duration, line=line[keep], tool=of_state("tool", int)[keep],
+        tool_length=of_state("tool_length", float)[keep], tool_notes=tuple(reader.notes),
+        work_offset=reader.work_offset, tolerance=reader.tolerance, end_line=reader.end_line, last_line=last_line,
+        problems=tuple(sorted(problems)),
+    )
+
+
+def _last_given(values: np.ndarray, group: np.ndarray) -> np.ndarray:
+    """The last non-NaN value at or before each row within its group (groups are runs of equal,
+    non-decreasing numbers); NaN where there is none."""
+    rows = np.arange(len(values))
+    source = np.maximum.accumulate(np.where(np.isnan(values), -1, rows)) if len(values) else rows
+    start = np.searchsorted(group, group, side="left")
+    return np.where(source >= start, values[np.maximum(source, 0)], np.nan)
+
+
+def _durations(position: np.ndarray, scale: np.ndarray, rapid: np.ndarray, inverse_time: np.ndarray,
+               feed: np.ndarray) -> np.ndarray:
+    """Seconds of each G1 block (positions mm / deg, F as programmed in units of ``scale`` mm)."""
+    step = np.diff(position, axis=0, prepend=np.full((1, 5), np.nan))
+    linear = np.linalg.norm(step[:, :3], axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_minute = np.where(np.any(step[:, :3] != 0, axis=1), linear / (feed * scale),
+                              np.linalg.norm(step[:, 3:], axis=1) / feed)
+        minutes = np.where(inverse_time, 1.0 / feed, per_minute)
+    minutes[rapid | ~(feed > 0)] = np.nan
+    return 60.0 * minutes
