@@ -397,3 +397,20 @@ def test_nurbs_with_a_wrong_knot_count_names_its_line(tmp_path: Path) -> None:
     text = NX_HEAD + "GOTO/0,0,10\nNURBS/\nKNOT/0.2,0.5,1.0\n" + cntrl + "GOTO/4,4,4\n"
     e = refused(tmp_path, text)
     assert e.line == 6 and "NURBS" in e.reason
+
+
+@pytest.mark.parametrize("name", ["nx_zlevel_coremill_mm.cls", "creo8_schruppen_roughing_mm.ncl",
+                                  "makino_ffcam_plane1_mm.cldata", "creo_v19_thread_mill_helical_inch.ncl"])
+def test_real_samples_post_and_certify(tmp_path: Path, name: str) -> None:
+    """Posted without timing (durations from the programmed feeds), each program verifies from its text."""
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    out = tmp_path / "out.nc"
+    result = CliRunner().invoke(main, [str(SAMPLES / name), "-o", str(out), "--no-timing", "-q",
+                                       "--tool-length", "100"])
+    assert result.exit_code == 0, result.output
+    header = out.read_text()[:2000]
+    assert "(VERIFIED: MAX TIP DEVIATION" in header and "ALL LIMITS HELD" in header
+    assert "(CL DIALECT " in header

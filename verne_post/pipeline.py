@@ -74,6 +74,7 @@ class PostResult:
         feed_length = float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[~self.rapid[1:]]))
         return {
             "source": self.poses.source,
+            "dialect": self.poses.dialect,
             "machine": machine.source,
             "verne_post": __version__,
             "ok": not self.violations,
@@ -228,6 +229,7 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         f"POSTPROCESSOR VERNE-POST {__version__}",
         f"MACHINE {machine.source} ({machine.name})",
         f"SOURCE {Path(poses.source).name}",
+        f"CL DIALECT {poses.dialect}",
         "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "

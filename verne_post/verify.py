@@ -33,6 +33,7 @@ for travel, reach and margins.
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 from collections.abc import Iterable
@@ -65,6 +66,11 @@ DELTA_TOL = 1e-3
 #: written numbers (block ends to 1e-4 mm, F to its decimals).
 FEED_SLACK = 0.01
 JOINT_SPEED_SLACK = 0.01
+#: mm: what the rounding of a block's two ends can add to its tip path. Sliders are written to
+#: 1e-4 mm and angles to 1e-5 deg (about 1e-4 mm at the table's reach): each end may sit up to
+#: ~2e-4 mm from the planned pose, so a block of a few micrometres can look several per cent
+#: faster than planned without being so. Absolute, so it matters only for tiny blocks.
+FEED_LENGTH_SLACK = 5e-4
 #: mm: a CL move whose tip travels less than this turns on the spot (as the planner's TIP_EPS).
 STILL_TIP = 1e-4
 #: CL candidates per block end when matching (several passes may reach the same point).
@@ -520,8 +526,8 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     """The block whose end reaches each CL pose (-1 where none does).
 
     Candidates: the block ends within ``tol`` (mm) and ``axis_tol`` (rad) of the pose. Where a
-    pose has several (a path passing twice, points closer than ``tol``), the one nearest to where
-    the unambiguous poses around it put it in the program is taken.
+    pose has several (a path passing twice, points closer than ``tol``), the earliest one at or
+    after the block the pose before it took.
     """
     n = len(reference.tip)
     matched = np.full(n, -1)
@@ -531,27 +537,41 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     # tip and axis together (the axis scaled so that axis_tol weighs as much as tol): the block
     # ends of a rotation on the spot share their tip but not their axis
     weight = tol / axis_tol
-    distance, index = cKDTree(np.hstack([ends.tip[usable], weight * ends.axis[usable]])).query(
-        np.hstack([reference.tip, weight * reference.axis]), k=min(_CANDIDATES, usable.size),
-        distance_upper_bound=math.sqrt(2) * tol)
+    tree = cKDTree(np.hstack([ends.tip[usable], weight * ends.axis[usable]]))
+    query = np.hstack([reference.tip, weight * reference.axis])
+    radius = math.sqrt(2) * tol
+    k = min(_CANDIDATES, usable.size)
+    distance, index = tree.query(query, k=k, distance_upper_bound=radius)
     distance, index = distance.reshape(n, -1), index.reshape(n, -1)
     pose, slot = np.nonzero(np.isfinite(distance))
-    block = usable[index[pose, slot]]
+    found = usable[index[pose, slot]]
+    # a point the program passes more than k times (a roughing job's retract point): all of them
+    crowded = np.flatnonzero(np.isfinite(distance[:, -1])) if k < usable.size else np.zeros(0, int)
+    if crowded.size:
+        lists = tree.query_ball_point(query[crowded], r=radius)
+        keep = ~np.isin(pose, crowded)
+        counts = np.fromiter((len(c) for c in lists), dtype=np.int64, count=crowded.size)
+        pose = np.r_[pose[keep], np.repeat(crowded, counts)]
+        found = np.r_[found[keep], usable[np.fromiter((i for c in lists for i in c), dtype=np.int64,
+                                                       count=int(counts.sum()))]]
+    block = found
     good = ((np.linalg.norm(reference.tip[pose] - ends.tip[block], axis=1) <= tol)
             & (_angle(reference.axis[pose], ends.axis[block]) <= axis_tol))
-    pose, block, distance = pose[good], block[good], distance[pose[good], slot[good]]
+    pose, block = pose[good], block[good]
     if pose.size == 0:
         return matched
-    count = np.bincount(pose, minlength=n)
-    single = count[pose] == 1
-    if single.any():
-        expected = np.interp(np.arange(n), pose[single], block[single])
-    else:
-        expected = np.arange(n) * (len(known) - 1) / max(n - 1, 1)
-    order = np.lexsort((distance, np.abs(block - expected[pose]), pose))
+    # The program runs the CL path in order: each pose takes the earliest candidate at or after
+    # the block the pose before it took (a path passing a point twice, points closer than tol).
+    # Where none is left (a program out of order), the last candidate, which the order check reports.
+    order = np.lexsort((block, pose))
     pose, block = pose[order], block[order]
-    first = np.r_[True, pose[1:] != pose[:-1]]
-    matched[pose[first]] = block[first]
+    bounds = np.flatnonzero(np.r_[True, pose[1:] != pose[:-1], True])
+    poses, blocks = pose[bounds[:-1]].tolist(), block.tolist()
+    previous = -1
+    for p, lo, hi in zip(poses, bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+        k = bisect.bisect_left(blocks, previous, lo, hi)
+        previous = blocks[k] if k < hi else blocks[hi - 1]
+        matched[p] = previous
     return matched
 
 
@@ -745,10 +765,12 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
                                                                                    minlength=len(moves)) > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(timed & np.isfinite(lowest), speed / lowest, np.nan)
+        # the rounding of the written block ends, as a share of the length the feed allows
+        ratio_slack = FEED_SLACK + FEED_LENGTH_SLACK / (lowest * minutes)
         peak_ratio = np.where(timed & np.isfinite(lowest), peak / lowest, np.nan)
         turn = np.degrees(np.linalg.norm(program.joints[moves, 3:] - program.joints[moves - 1, 3:], axis=1))
         rotary_ratio = np.where(timed & still, turn / minutes / machine.timing.rotary_feed, np.nan)
-    for i in np.flatnonzero(ratio > 1 + FEED_SLACK):
+    for i in np.flatnonzero(ratio > 1 + ratio_slack):
         m = moves[i]
         findings.append(Finding(int(program.line[m]), "feed", f"tool tip at {speed[i]:.1f} mm/min, programmed "
                                 f"{lowest[i]:.1f} mm/min", cl_line=int(reference.line[pieces.last[m]]),
