@@ -44,6 +44,7 @@ SCREEN_POSES = 300
 COARSE_POSES = 120
 FINEST_STEP = 1.0  # mm: the pattern search stops at this step
 FINE_FROM = 16.0  # mm: smaller steps of the pattern search use the larger screen
+IMPROVEMENT = 1e-5  # headroom: smaller gains do not move the pattern search
 ROUNDS = 4  # verify / enrich / search rounds at most
 
 
@@ -78,8 +79,8 @@ class Placement:
     def header(self) -> tuple[str, ...]:
         """G-code header lines: how the offset was chosen and the room around it."""
         room = " ".join(f"{a.upper()} -{lo:.1f}/+{hi:.1f}" for a, (lo, hi) in zip(AXES, self.room, strict=True))
-        return (f"WORK OFFSET CHOSEN BY VERNE-POST PLACE: LARGEST SMALLEST HEADROOM {self.margin:.3f} "
-                f"({self.limit.upper()}, CL LINE {self.line})",
+        return (f"WORK OFFSET CHOSEN BY VERNE-POST PLACE FOR THE MOST HEADROOM TO EVERY LIMIT: SMALLEST "
+                f"{self.margin:.3f} AT CL LINE {self.line}, {self.limit.upper()}",
                 f"PART MAY MOVE BY {room} MM AND STILL RUN")
 
 
@@ -251,10 +252,12 @@ def _pattern_search(machine: Machine, coarse: _Screen, fine: _Screen, starts: np
             scores = _score(_screen_headroom(machine, screen, trial)).reshape(len(active), -1)
             evaluations += len(trial)
             best = np.argmax(scores, axis=1)
-            better = scores[np.arange(len(active)), best] > score[active] + 1e-12
+            better = scores[np.arange(len(active)), best] > score[active] + IMPROVEMENT
             moved = active[better]
             current[moved] = trial.reshape(len(active), -1, 3)[better, best[better]]
             score[moved] = scores[better, best[better]]
+            # A step that paid off is tried twice as long next time (up to the first), else halved.
+            steps[moved] = np.minimum(steps[moved] * 2.0, step)
             steps[active[~better]] /= 2.0
             tick()
     order = np.argsort(-score, kind="stable")
