@@ -61,14 +61,14 @@ def envelope(x: np.ndarray, y: np.ndarray, bins: int = COLUMNS) -> tuple[list, l
             hits = np.flatnonzero(data == reduce.reduceat(data, starts)[bin_of])
             picks.append(hits[np.unique(bin_of[hits], return_index=True)[1]])
         keep = np.unique(np.concatenate(picks))
-    return _rounded(x[keep]), _rounded(y[keep])
+    return _rounded(x[keep], 7), _rounded(y[keep])
 
 
 def _series(x: np.ndarray, columns: dict[str, np.ndarray], lines: np.ndarray) -> dict[str, Any]:
     """Each column decimated on its own, and a CL line lookup over x (for the tooltips)."""
     step = max(1, len(x) // (4 * COLUMNS))
     return {"series": {name: envelope(x, values) for name, values in columns.items()},
-            "line_x": _rounded(x[::step]), "line": [int(v) for v in lines[::step]]}
+            "line_x": _rounded(x[::step], 7), "line": [int(v) for v in lines[::step]]}
 
 
 def _rounded(values: np.ndarray, digits: int = 4) -> list:
@@ -92,8 +92,9 @@ def _trajectory(machine: Machine, result: PostResult) -> dict[str, Any] | None:
     programmed = np.where(result.rapid | (programmed > 1e8), np.nan, programmed)
     chunks: list[tuple[np.ndarray, ...]] = []
     for t, q, qd, qdd, block, rapid in samples(schedule, schedule.total / SAMPLES):
-        feed = tip_speed(machine, q, qd, lengths[block]) * 60.0
-        chunks.append((t, q, qd, qdd, feed, np.where(rapid, np.nan, programmed[block]), block))
+        # Rapids have no programmed feed: they would only squash the feed plot's scale.
+        feed = np.full(len(t), np.nan) if rapid else tip_speed(machine, q, qd, lengths[block]) * 60.0
+        chunks.append((t, q, qd, qdd, feed, np.full(len(t), np.nan) if rapid else programmed[block], block))
     t, q, qd, qdd, feed, wanted, block = (np.concatenate(parts) for parts in zip(*chunks, strict=True))
     scale = np.array([1.0, 1.0, 1.0, 180 / np.pi, 180 / np.pi])
     columns = {}
@@ -147,7 +148,7 @@ def _workspace_maps(machine: Machine, result: PostResult, offset: np.ndarray) ->
     tilt = float(np.median(np.degrees(np.arctan2(np.hypot(poses.axis[:, 0], poses.axis[:, 1]), poses.axis[:, 2]))))
     tilt = round(tilt)
     ws = workspace(machine, tool_length=length, tilt=tilt, rotary=0.0, step=20.0,
-                   z=float(np.median(poses.tip[:, 2])))
+                   z=float(np.round(np.median(poses.tip[:, 2]))))
     sections = []
     for section in ws.sections:
         value = section.headroom
@@ -285,8 +286,7 @@ pre.cl span.named{background:#fff3bf}pre.cl span:target{background:#ffd43b}pre.c
 #joint-plots{display:grid;grid-template-columns:repeat(3,1fr);column-gap:12px}
 #margin-plots{display:grid;grid-template-columns:repeat(2,1fr);column-gap:12px}
 .plot .caption{font-size:12px;color:#555;min-height:1.3em}
-.maps{display:grid;grid-template-columns:repeat(3,1fr);gap:10px}.maps canvas{width:100%;aspect-ratio:1;
-border:1px solid #e5e5e5}
+.maps{display:grid;grid-template-columns:repeat(3,1fr);gap:10px}.maps canvas{width:100%;border:1px solid #e5e5e5}
 .note{color:#777}.legend span{display:inline-block;margin-right:1em;font-size:12px}
 .legend i{display:inline-block;width:14px;height:3px;vertical-align:middle;margin-right:4px}
 """
@@ -460,11 +460,12 @@ _SCRIPT = r"""
   ws.sections.forEach(function (s) {
     var box = el("div", "", maps), canvas = el("canvas", "", box), cap = el("div", "caption", box);
     cap.textContent = s.plane[0] + "-" + s.plane[1] + " section at " + ({xz: "y", yz: "x", xy: "z"})[s.plane] +
-      " = " + s.level + " mm";
+      " = " + Math.round(s.level) + " mm";
     var raw = atob(s.cells), axes = {x: 0, y: 1, z: 2};
     plots.push(function () {
-      var size = canvas.clientWidth, ratio = window.devicePixelRatio || 1;
-      canvas.width = size * ratio; canvas.height = size * ratio;
+      var width = canvas.clientWidth, ratio = window.devicePixelRatio || 1;
+      var height = width * (s.v[1] - s.v[0]) / (s.u[1] - s.u[0]);  // 1 mm is as long across as up
+      canvas.style.height = height + "px"; canvas.width = width * ratio; canvas.height = height * ratio;
       var g = canvas.getContext("2d"), image = g.createImageData(s.nu, s.nv);
       for (var r = 0; r < s.nv; r++) for (var c = 0; c < s.nu; c++) {
         var rgb = colour(raw.charCodeAt(r * s.nu + c)), k = ((s.nv - 1 - r) * s.nu + c) * 4;
