@@ -88,20 +88,6 @@ class Placement:
 
 
 @dataclass(frozen=True)
-class _Screen:
-    """CL poses for the fast screen: part-frame tips (mm), axes, tool lengths and their poses."""
-
-    pose: np.ndarray  # (S,) index into the program's poses
-    tip: np.ndarray  # (S, 3) mm, part frame
-    axis: np.ndarray  # (S, 3)
-    length: np.ndarray  # (S,) mm
-    theta2: np.ndarray  # (S,) rad: the rotary angle the branch stage uses at the pole
-    prefer: np.ndarray  # (S,) angle pair the branch stage chose (+1, -1), 0 where not known yet
-    run: np.ndarray  # (S,) run of the branch stage (one pair per run), non-decreasing
-    in_cone: np.ndarray  # (S,) theta2 interpolated by the branch stage: no choice of pair
-
-
-@dataclass(frozen=True)
 class _Points:
     """The points the screen may use: the CL poses, and after a full check its block ends
     (CL poses and the points linearisation inserted on the moves into them), with what the
@@ -112,26 +98,26 @@ class _Points:
     axis: np.ndarray  # (P, 3)
     length: np.ndarray  # (P,) mm
     theta2: np.ndarray  # (P,) rad
-    pair: np.ndarray  # (P,) +1 / -1, 0 before any full check
-    run: np.ndarray  # (P,) runs as in verne_post.branch: split at sequences and pole-cone edges
-    in_cone: np.ndarray  # (P,) bool
+    pair: np.ndarray  # (P,) angle pair the branch stage chose (+1, -1), 0 before any full check
+    run: np.ndarray  # (P,) runs as in verne_post.branch (one pair each): split at sequences and pole-cone edges
+    in_cone: np.ndarray  # (P,) theta2 interpolated by the branch stage: no choice of pair
 
-    def screen(self, rows: np.ndarray) -> _Screen:
-        """The points of CL poses ``rows``."""
-        k = np.flatnonzero(np.isin(self.pose, rows))
-        return _Screen(self.pose[k], self.tip[k], self.axis[k], self.length[k], self.theta2[k], self.pair[k],
-                       self.run[k], self.in_cone[k])
+    def screen(self, rows: np.ndarray) -> _Points:
+        """The points of CL poses ``rows``: what the fast screen evaluates."""
+        k = np.isin(self.pose, rows)
+        return _Points(*(getattr(self, name)[k] for name in _Points.__dataclass_fields__))
 
     def chosen(self, checked: Checked, offset: np.ndarray) -> _Points:
-        """The block ends of a full check at ``offset`` and the branch stage's choices there."""
+        """The block ends of a full check at ``offset`` (every CL pose has one) and the branch
+        stage's choices there; ``self`` must hold every CL pose."""
         blocks, result = checked.blocks, checked.blocks.result
         pose = blocks.pose
+        first = np.searchsorted(self.pose, pose)  # a point of the same CL pose: its length and run
         in_cone = checked.path.in_cone[pose]
         # In the cone the pair only says which theta2 was taken: the screen's "+1" is that theta2.
         pair = np.where(in_cone, 1, result.pair).astype(int)
-        return _Points(pose, blocks.tip - offset, blocks.axis, self.length[np.searchsorted(self.pose, pose)],
-                       np.nan_to_num(result.joints[:, 4]), pair, self.run[np.searchsorted(self.pose, pose)],
-                       in_cone)
+        return _Points(pose, blocks.tip - offset, blocks.axis, self.length[first], np.nan_to_num(result.joints[:, 4]),
+                       pair, self.run[first], in_cone)
 
 
 def _points_of(machine: Machine, poses: MachinePoses) -> _Points:
@@ -143,9 +129,8 @@ def _points_of(machine: Machine, poses: MachinePoses) -> _Points:
                    in_cone)
 
 
-_DIRECTIONS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)
-                        if (i, j, k) != (0, 0, 0)],
-                        dtype=float)
+#: The 26 neighbours of a point of a cubic grid (pattern search, extreme poses).
+_DIRECTIONS = np.array([d for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)], dtype=float) - 1.0
 
 
 def _spread(poses: MachinePoses, machine: Machine, size: int) -> np.ndarray:
@@ -162,10 +147,10 @@ def _spread(poses: MachinePoses, machine: Machine, size: int) -> np.ndarray:
     return np.unique(np.concatenate(picked))
 
 
-def _screen_headroom(machine: Machine, screen: _Screen, offsets: np.ndarray, exact: bool = False) -> np.ndarray:
+def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exact: bool = False) -> np.ndarray:
     """(K, S) smallest headroom of each screened pose at each offset (K, 3).
 
-    Like the branch stage, a pose takes the angle pair chosen before (``screen.prefer``) while
+    Like the branch stage, a pose takes the angle pair chosen before (``screen.pair``) while
     that runs, else the other one; where no choice is known yet, the better of the two. On the
     pole the two choices are theta2 and theta2 + pi.
     """
@@ -188,14 +173,14 @@ def _screen_headroom(machine: Machine, screen: _Screen, offsets: np.ndarray, exa
                 values[rows[ok]] = headroom(machine, ik.joints[ok],
                                             margins(geom, ik.joints[ok], ik.platform[ok], ik.alpha[ok]))
         found[pair] = smallest(values)[0].reshape(k, s)
-    if not np.any(screen.prefer):
+    if not np.any(screen.pair):
         return np.maximum(found[1], found[-1])
     # One pair per run: the chosen one while it runs throughout, else the other; neither: the
     # run fails (the branch stage would switch pairs mid-cut). In the cone there is no choice.
     starts = np.flatnonzero(np.r_[True, screen.run[1:] != screen.run[:-1]])
     counts = np.diff(np.r_[starts, s])
-    preferred = np.where(screen.prefer > 0, found[1], found[-1])
-    other = np.where(screen.prefer > 0, found[-1], found[1])
+    preferred = np.where(screen.pair > 0, found[1], found[-1])
+    other = np.where(screen.pair > 0, found[-1], found[1])
     preferred_runs = np.repeat(np.minimum.reduceat(preferred, starts, axis=1), counts, axis=1) >= 0
     other_runs = np.repeat(np.minimum.reduceat(other, starts, axis=1), counts, axis=1) >= 0
     chosen = np.where(preferred_runs | screen.in_cone | ~other_runs, preferred, other)
@@ -235,7 +220,7 @@ def _grid(lower: np.ndarray, upper: np.ndarray, counts: tuple[int, int, int]) ->
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def _pattern_search(machine: Machine, coarse: _Screen, fine: _Screen, starts: np.ndarray, step: float,
+def _pattern_search(machine: Machine, coarse: _Points, fine: _Points, starts: np.ndarray, step: float,
                     tick: Callable[[], None]) -> tuple[np.ndarray, np.ndarray, int]:
     """Maximise the score from each start (B, 3): move to the best of the 26 neighbours at
     ``step`` (mm) while that improves, else halve the step, down to FINEST_STEP. Steps of
@@ -283,6 +268,8 @@ class _Verdict:
 
 
 def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> _Verdict:
+    """The full checks of the program (poses at work offset 0) at ``offset`` (mm), with the
+    smallest headroom over block ends and motion samples and the poses to screen next."""
     shifted = replace(poses, tip=poses.tip + offset)
     checked = check_poses(machine, shifted, options)
     blocks = checked.blocks
@@ -339,7 +326,7 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
             outside[d] = lo[k]
             grown = np.union1d(rows, verdict.worst)
             if len(grown) == len(rows):  # nothing new to screen: bisect with the full checks
-                while outside[d] - inside[d] > ROOM_RESOLUTION * 8:
+                while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
                     middle = (inside[d] + outside[d]) / 2.0
                     if _verify(machine, poses, offset + middle * directions[d], options).runs:
                         inside[d] = middle
@@ -355,7 +342,7 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
                  for a in range(3))
 
 
-def _bisect(machine: Machine, screen: _Screen, offset: np.ndarray, directions: np.ndarray, lo: np.ndarray,
+def _bisect(machine: Machine, screen: _Points, offset: np.ndarray, directions: np.ndarray, lo: np.ndarray,
             hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Bisect each direction's distance (mm) between ``lo`` (runs) and ``hi`` (fails or the
     limit) on the screen, all directions at once; returns the final (lo, hi)."""
