@@ -111,6 +111,8 @@ def main() -> None:
     \b
     verne-post part.cls -o part.nc        postprocess (same as 'verne-post post ...')
     verne-post check part.cls             everything but writing the program
+    verne-post place part.cls             where to clamp the part (work offset and room)
+    verne-post workspace -o ws.png        map of the tool-tip workspace for a tool axis
     verne-post ik / fk ...                kinematics of single poses or CSV files
     """
 
