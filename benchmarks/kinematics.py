@@ -148,7 +148,7 @@ def main() -> None:
 
     print(f"\n{'path':<46}{'per second':>14}{'x Newton':>10}")
     print(f"{'working-mode IK (closed form, vectorised)':<46}{ik_rate:>14,.0f}{ik_rate / newton_ik_rate:>10.0f}")
-    print(f"{'  inverse_kinematics API (both pairs+status)':<46}{api_rate:>14,.0f}"
+    print(f"{'  inverse_kinematics API (pairs, status, margins)':<46}{api_rate:>14,.0f}"
           f"{api_rate / newton_ik_rate:>10.0f}")
     print(f"{'all-solutions IK (sextic, both pairs)':<46}{ik_all_rate:>14,.0f}"
           f"{ik_all_rate / newton_ik_rate:>10.1f}")

@@ -20,10 +20,11 @@ from .api import (
 )
 from .kinematics import module_fk_all, module_fk_working, module_ik_all, module_ik_working
 from .machine import Geometry, Machine, load_machine
+from .workspace import workspace
 
 __all__ = [
     "FKResult", "Geometry", "IKResult", "Machine", "Status", "forward_kinematics", "forward_kinematics_all",
     "inverse_kinematics", "inverse_kinematics_all", "inverse_kinematics_pairs", "load_machine", "module_fk_all",
-    "module_fk_working", "module_ik_all", "module_ik_working", "within_limits",
+    "module_fk_working", "module_ik_all", "module_ik_working", "within_limits", "workspace",
 ]
 __version__ = "0.1.0"

@@ -198,7 +198,10 @@ def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
     pi of the hint; on the pole (axis along the table normal) theta2 = hint (0 without one).
     """
     hint = 0.0 if theta2_hint is None else theta2_hint
-    plus, minus = inverse_kinematics_pairs(machine, tip, axis, tool_length=tool_length, theta2_at_pole=hint)
+    # Both pairs without margins (reach, travel, rod clearance), margins for the chosen pair
+    # only; where those make it singular, the other pair's margins decide.
+    plus, minus = inverse_kinematics_pairs(machine, tip, axis, tool_length=tool_length, theta2_at_pole=hint,
+                                           with_margins=False)
 
     def cost(r: IKResult) -> np.ndarray:
         theta1, theta2 = r.joints[:, 3], r.joints[:, 4]
@@ -206,7 +209,14 @@ def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
         penalty = np.array([0.0, 1e9, 1e6, 1e3])[r.status]  # by Status: ok, unreachable, limits, singular
         return penalty + np.nan_to_num(preference, nan=0.0)
 
-    chosen = plus.take(cost(plus) <= cost(minus), minus)
+    use_plus = cost(plus) <= cost(minus)
+    chosen = assess(machine, plus.take(use_plus, minus), tool_length)
+    other = plus.take(~use_plus, minus)
+    retry = np.flatnonzero((chosen.status == Status.SINGULAR) & (other.status == Status.OK))
+    if retry.size:
+        alternative = assess(machine, other.rows(retry), tool_length)
+        better = cost(alternative) < cost(chosen.rows(retry))
+        chosen = chosen.scatter(retry[better], alternative.rows(better))
     joints = chosen.joints.copy()
     joints[:, 4] = unwrap_near(joints[:, 4], hint)
     return chosen.with_joints(joints)

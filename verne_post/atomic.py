@@ -7,12 +7,14 @@ import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
+from typing import IO, Any
 
 
 @contextlib.contextmanager
-def atomic_write(path: str | os.PathLike[str], newline: str | None = "\n") -> Iterator[TextIO]:
-    """Open a temporary file beside ``path`` for ASCII text; on success it replaces ``path``.
+def atomic_write(path: str | os.PathLike[str], newline: str | None = "\n", binary: bool = False
+                 ) -> Iterator[IO[Any]]:
+    """Open a temporary file beside ``path`` for ASCII text (or bytes with ``binary``); on
+    success it replaces ``path``.
 
     The file is flushed to disk before the rename and keeps the permissions of the file it
     replaces (or the usual ones for a new file). On any error the temporary file is removed
@@ -21,7 +23,7 @@ def atomic_write(path: str | os.PathLike[str], newline: str | None = "\n") -> It
     target = Path(path)
     fd, temporary = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
-        with os.fdopen(fd, "w", encoding="ascii", newline=newline) as handle:
+        with (os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="ascii", newline=newline)) as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())

@@ -6,11 +6,12 @@ A thin layer: parse options, call the library, print. mm and degrees at this int
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import io
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,7 +45,7 @@ class _DefaultToPost(click.Group):
     def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
         if args and args[0] not in self.commands and args[0] not in ("--help", "-h", "--version"):
             args = ["post", *args]
-        return super().parse_args(ctx, args)
+        return super().parse_args(ctx, _auto_offset(args))
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
         """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2."""
@@ -56,6 +57,19 @@ class _DefaultToPost(click.Group):
         except click.Abort:
             click.echo("verne-post: aborted", err=True)
             sys.exit(1)
+
+
+def _auto_offset(args: list[str]) -> list[str]:
+    """``--work-offset auto`` (three numbers otherwise) becomes the hidden flag ``--auto-offset``."""
+    out: list[str] = []
+    for arg in args:
+        if arg.lower() == "auto" and out and out[-1] == "--work-offset":
+            out[-1] = "--auto-offset"
+        elif arg.lower() == "--work-offset=auto":
+            out.append("--auto-offset")
+        else:
+            out.append(arg)
+    return out
 
 
 def user_errors(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -101,6 +115,9 @@ def main() -> None:
     verne-post part.cls -o part.nc        postprocess (same as 'verne-post post ...')
     verne-post check part.cls             everything but writing the program
     verne-post verify part.nc [--against part.cls]   check a G-code program
+    verne-post place part.cls             where to clamp the part (work offset and room)
+    verne-post workspace -o ws.png        map of the tool-tip workspace for a tool axis
+    verne-post toolpath part.cls          the toolpath as the reader understood it (CSV)
     verne-post ik / fk ...                kinematics of single poses or CSV files
     """
 
@@ -308,7 +325,9 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--tool-length", type=float, default=None,
                      help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
         click.option("--work-offset", nargs=3, type=float, default=None,
-                     help="Part zero X Y Z in the table frame, mm (default: the machine file's)."),
+                     help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
+                          "offset with the most room to every limit (see 'verne-post place')."),
+        click.option("--auto-offset", is_flag=True, hidden=True),
         click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
         click.option("--tol", type=float, default=0.005, show_default=True,
                      help="Tool tip deviation allowed between blocks, mm."),
@@ -318,7 +337,8 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
                      help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
         *_reader_options,
         click.option("--report", "report_path", type=click.Path(dir_okay=False),
-                     help="Write violations and statistics as JSON."),
+                     help="Write violations and statistics: JSON, or a self-contained HTML page when it ends "
+                          "in .html."),
         click.option("--no-timing", is_flag=True,
                      help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
         click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
@@ -330,20 +350,42 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
     return function
 
 
-def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool,
+def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool,
                   **choices: Any) -> tuple[Machine, Any, Any]:
     """Load the machine and run every stage but writing; a progress bar on a terminal."""
     from .pipeline import PostOptions, postprocess
 
     if min(choices["tol"], choices["axis_tol"], choices["arc_tol"]) <= 0:
         raise InputError("--tol, --axis-tol and --arc-tol must be positive")
+    if auto_offset and choices["work_offset"]:
+        raise InputError("give --work-offset either as X Y Z or as auto, once")
     machine = load_machine(machine_path)
-    options = PostOptions(**{**choices, "work_offset": choices["work_offset"] or None}, plan=not no_timing)
-    stages = 4 if no_timing else 5
-    stream = sys.stderr if not quiet and sys.stderr.isatty() else io.StringIO()
-    with click.progressbar(length=stages, label="verne-post", file=stream) as bar:
-        result = postprocess(cl_file, machine, options, progress=lambda stage: bar.update(1))
+    offset = "auto" if auto_offset else choices["work_offset"] or None
+    options = PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing)
+    stages = (4 if no_timing else 5) + (PLACEMENT_STEPS if auto_offset else 0)
+    with _progress(stages, quiet) as tick:
+        result = postprocess(cl_file, machine, options, progress=lambda stage: tick())
     return machine, options, result
+
+
+#: About how many progress calls a placement makes (the bar stops short of the end until done).
+PLACEMENT_STEPS = 30
+
+
+@contextlib.contextmanager
+def _progress(steps: int, quiet: bool) -> Iterator[Callable[[], None]]:
+    """A progress bar on stderr when it is a terminal (never past its last step before the end)."""
+    stream = sys.stderr if not quiet and sys.stderr.isatty() else io.StringIO()
+    done = 0
+    with click.progressbar(length=steps, label="verne-post", file=stream) as bar:
+        def tick() -> None:
+            nonlocal done
+            if done < steps - 1:
+                done += 1
+                bar.update(1)
+
+        yield tick
+        bar.update(steps - done)
 
 
 def _finish(machine: Machine, options: Any, result: Any, report_path: str | None, quiet: bool,
@@ -355,7 +397,11 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
             click.echo(f"verne-post: warning: {warning}", err=True)
         if len(result.warnings) > max_messages:
             click.echo(f"verne-post: ... and {len(result.warnings) - max_messages} more warnings", err=True)
-    if report_path:
+    if report_path and report_path.lower().endswith((".html", ".htm")):
+        from .report_html import write_html_report
+
+        write_html_report(report_path, machine, options, result)
+    elif report_path:
         write_json(report_path, result.report(machine, options))
     if result.violations:
         for v in result.violations[:max_messages]:
@@ -517,3 +563,99 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     if not quiet:
         click.echo(f"verne-post: {program}: {verification.certificate().lower()} ({verification.blocks} blocks, "
                    f"{verification.samples} poses checked)", err=True)
+
+
+# ----------------------------------------------------------------------------- place
+
+
+@main.command("place")
+@click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False))
+@machine_option
+@click.option("--tool-length", type=float, default=None,
+              help="Tool length in mm for tools whose length neither the CL file nor the machine gives.")
+@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
+@click.option("--tol", type=float, default=0.005, show_default=True, help="As for 'post': tip deviation, mm.")
+@click.option("--axis-tol", type=float, default=0.05, show_default=True, help="As for 'post': axis deviation, deg.")
+@click.option("--arc-tol", type=float, default=0.001, show_default=True, help="As for 'post': arc chords, mm.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the placement as JSON.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+@user_errors
+def place_command(cl_file: str, machine_path: str | None, tool_length: float | None, units: str | None, tol: float,
+                  axis_tol: float, arc_tol: float, report_path: str | None, quiet: bool) -> None:
+    """Where to clamp the part: the work offset at which PART.cls runs with the most room to every
+    limit and singularity, and how far the part may move from it and still run.
+
+    Prints the offset to use with 'post --work-offset X Y Z' (or use '--work-offset auto' there).
+    Exit code 3 when no offset works, with the reason.
+    """
+    from .cl import read_toolpath
+    from .pipeline import PostOptions
+    from .placement import place
+    from .poses import machine_poses
+    from .tables import write_json
+
+    if min(tol, axis_tol, arc_tol) <= 0:
+        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
+    machine = load_machine(machine_path)
+    options = PostOptions(tool_length=tool_length, units=units, tol=tol, axis_tol=axis_tol, arc_tol=arc_tol, plan=False)
+    toolpath = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol)
+    poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length)
+    with _progress(PLACEMENT_STEPS, quiet) as tick:
+        placement = place(machine, poses, options, progress=lambda stage: tick())
+    if report_path:
+        write_json(report_path, {"source": toolpath.source, "machine": machine.source, **placement.to_dict()})
+    if not placement.feasible:
+        click.echo(f"verne-post: error: {toolpath.source}: no work offset lets the whole program run: "
+                   f"{placement.reason}", err=True)
+        sys.exit(3)
+    x, y, z = placement.offset
+    click.echo(f"work offset {x:.3f} {y:.3f} {z:.3f} mm (part zero in the table frame)")
+    click.echo(f"smallest headroom {placement.margin:.3f} ({placement.limit}) at {toolpath.source}:{placement.line}")
+    for axis, (minus, plus) in zip("XYZ", placement.room, strict=True):
+        click.echo(f"room {axis} -{minus:.2f} / +{plus:.2f} mm")
+    if not quiet:
+        click.echo(f"verne-post: {placement.screened} offsets screened, {placement.seconds:.1f} s", err=True)
+
+
+# ----------------------------------------------------------------------------- workspace
+
+
+@main.command("workspace")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True,
+              help="Image file: PNG, or SVG when it ends in .svg.")
+@machine_option
+@tool_length_option
+@click.option("--tilt", type=float, default=0.0, show_default=True,
+              help="Tool axis angle from the table normal, degrees.")
+@click.option("--rotary", type=float, default=0.0, show_default=True,
+              help="Rotary table angle theta2, degrees (turns the tool axis about the table normal).")
+@click.option("--z", "level", type=float, default=None,
+              help="Height of the plan view, mm, table frame (default: where the x-z section is widest).")
+@click.option("--step", type=float, default=10.0, show_default=True, help="Grid spacing, mm.")
+@click.option("--program", type=click.Path(dir_okay=False), help="Overlay this CL file's tool tips.")
+@click.option("--work-offset", nargs=3, type=float, default=None,
+              help="Work offset of --program, mm (default: the machine file's).")
+@user_errors
+def workspace_command(output: str, machine_path: str | None, tool_length: float, tilt: float, rotary: float,
+                      level: float | None, step: float, program: str | None,
+                      work_offset: tuple[float, float, float] | None) -> None:
+    """Map of the tool-tip positions (table frame) the machine reaches with the tool axis at
+    --tilt and --rotary: x-z and y-z sections through the table centre and a plan view,
+    coloured by the smallest headroom to any limit, the limiting constraints labelled."""
+    from .workspace import plot_workspace, workspace
+
+    if not 0 < step <= 200:
+        raise InputError("--step must be in (0, 200] mm")
+    if not -180 <= tilt <= 180:
+        raise InputError("--tilt must be within +-180 degrees")
+    if not output.lower().endswith((".png", ".svg")):
+        raise InputError("the output must end in .png or .svg")
+    machine = load_machine(machine_path)
+    tips = None
+    if program:
+        from .cl import read_toolpath
+
+        offset = np.asarray(work_offset if work_offset else machine.work_offset)
+        tips = read_toolpath(program).tip + offset
+    plot_workspace(workspace(machine, tool_length=tool_length, tilt=tilt, rotary=rotary, z=level, step=step),
+                   output, tips)

@@ -11,7 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -29,12 +29,16 @@ from .timing import Limits
 from .toolpath import Dwell, ToolChange
 from .verify import Reference, Verification, verify_program
 
+if TYPE_CHECKING:
+    from .placement import Placement
+
 
 @dataclass(frozen=True)
 class PostOptions:
     """User choices (mm and degrees, as on the command line)."""
 
-    work_offset: tuple[float, float, float] | None = None  # part zero in the table frame; None: machine file
+    # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.
+    work_offset: tuple[float, float, float] | Literal["auto"] | None = None
     tool_length: float | None = None  # mm, for tools whose length nothing else gives
     units: Literal["mm", "inch"] | None = None  # override the CL file's units
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
@@ -60,6 +64,7 @@ class PostResult:
     program: Program | None
     schedule: Schedule | None
     seconds: dict[str, float] = field(default_factory=dict)
+    placement: Placement | None = None  # how the work offset was chosen (work_offset "auto")
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
@@ -95,6 +100,8 @@ class PostResult:
             "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
                        "length_from": t.source} for t in self.poses.tools],
             "timing": self._timing(machine),
+            "work_offset_mm": list(self.placement.offset if self.placement else _offset(machine, options)),
+            "placement": None if self.placement is None else self.placement.to_dict(),
             "seconds": self.seconds,
         }
 
@@ -157,6 +164,38 @@ def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.
     return np.where(poses.inverse_time[blocks.pose], inverse, speed)
 
 
+@dataclass(frozen=True)
+class Checked:
+    """The program in joint space with everything the machine cannot do (stages 3 to 5)."""
+
+    path: PathIK
+    blocks: Blocks
+    rapid: np.ndarray  # (M,) per block
+    violations: tuple[Violation, ...]
+
+
+def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
+                lap: Callable[[str], None] = lambda stage: None) -> Checked:
+    """IK and branch, linearisation and every check of table-frame poses (no timing); violations
+    sorted by line. Placement calls this for each candidate work offset."""
+    cone = np.radians(machine.pole.cone)
+    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
+    lap("ik")
+    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
+    lap("linearise")
+    rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
+    rapid[0] = True  # where the machine stands before the program is unknown: position with G0
+    violations = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
+    for k in blocks.unresolved:
+        violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
+                                                                f"{options.axis_tol} deg of the CL path"))
+    for k in np.flatnonzero(solved.pair_switch):
+        violations.append(Violation(int(poses.line[k]), "branch", "no single tool-axis angle pair reaches this whole "
+                                                                  "cut: the table would turn half a turn mid-cut"))
+    violations.sort(key=lambda v: (v.line, v.kind))
+    return Checked(solved, blocks, rapid, tuple(violations))
+
+
 def postprocess(path: str | Path, machine: Machine, options: PostOptions,
                 progress: Callable[[str], None] = lambda stage: None) -> PostResult:
     """Run every stage except writing. Raises InputError for bad input; violations are returned."""
@@ -173,24 +212,23 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
                              arc_direction=options.arc_direction, frame=options.frame)
     lap("parse")
-    poses = machine_poses(toolpath, machine, work_offset=options.work_offset, tool_length=options.tool_length)
-    cone = np.radians(machine.pole.cone)
-    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
-    lap("ik")
-    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
-    lap("linearise")
-    rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
-    rapid[0] = True  # where the machine stands before the program is unknown: position with G0
+    placement = None
+    if options.work_offset == "auto":
+        from .placement import place
+
+        zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length)
+        placement = place(machine, zero, options, progress=progress)
+        options = replace(options, work_offset=placement.offset)
+        lap("placement")
+    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options),
+                          tool_length=options.tool_length)
+    checked = check_poses(machine, poses, options, lap)
+    solved, blocks, rapid, violations = checked.path, checked.blocks, checked.rapid, list(checked.violations)
+    if placement is not None and not placement.feasible:
+        violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
+                                                                    f"{placement.reason}"))
     lines = poses.line[blocks.pose]
-    violations = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], lines)
     source = poses.source
-    for k in blocks.unresolved:
-        violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
-                                                                f"{options.axis_tol} deg of the CL path"))
-    for k in np.flatnonzero(solved.pair_switch):
-        violations.append(Violation(int(poses.line[k]), "branch", "no single tool-axis angle pair reaches this whole "
-                                                                  "cut: the table would turn half a turn mid-cut"))
-    violations.sort(key=lambda v: (v.line, v.kind))
     warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
     if solved.in_cone.any() and machine.pole.cone > options.axis_tol:
         warnings.append(f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the "
@@ -213,17 +251,25 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
             violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
                                         f"cannot plan the feed motion: {error}"))
         lap("timing")
-    program = None if violations else _program(machine, poses, blocks, rapid, duration, options)
-    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, schedule, seconds)
+    program = None if violations else _program(machine, poses, blocks, rapid, duration, options, placement)
+    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, schedule, seconds,
+                      placement)
+
+
+def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
+    """The work offset in force (mm): the option's, else the machine file's."""
+    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    assert offset != "auto", "postprocess resolves the automatic work offset first"
+    return offset
 
 
 def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
-             options: PostOptions) -> Program:
+             options: PostOptions, placement: Placement | None) -> Program:
     events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
     if poses.tools and poses.tools[0].source == "--tool-length" and poses.tools[0].number == 0:
         # motion before any tool change: the program still says which tool length its joints are for
         events.insert(0, ToolChange(0, poses.tools[0].line, 0, poses.tools[0].length))
-    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    offset = _offset(machine, options)
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (
         f"POSTPROCESSOR VERNE-POST {__version__}",
@@ -232,6 +278,8 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         f"CL DIALECT {poses.dialect}",
         "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
+        *(placement.header() if placement is not None else (
+            "WORK OFFSET FROM " + ("THE MACHINE FILE" if options.work_offset is None else "THE USER"),)),
         f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "
         f"(CL POINTS {len(poses)}, INSERTED {int(np.sum(blocks.fraction < 1))})",
         f"CYCLE TIME {np.sum(duration):.1f} S ({_TIME_BASIS[options.plan]})",
@@ -261,7 +309,7 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
         write_program(result.program, fmt, path)
         return None
     text = program_text(result.program, fmt)
-    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    offset = result.placement.offset if result.placement is not None else _offset(machine, options)
     verification = verify_program(text, machine, source=str(path), against=Reference.of(result.poses),
                                   work_offset=offset, tol=options.tol, axis_tol=options.axis_tol)
     if verification.ok:
@@ -274,4 +322,5 @@ def gcode_format(machine: Machine) -> GcodeFormat:
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
-__all__ = ["PostOptions", "PostResult", "block_durations", "feed_speed", "gcode_format", "postprocess", "write_gcode"]
+__all__ = ["Checked", "PostOptions", "PostResult", "block_durations", "check_poses", "feed_speed", "gcode_format",
+           "postprocess", "write_gcode"]

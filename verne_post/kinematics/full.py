@@ -112,14 +112,16 @@ class MachineIK:
 
 
 def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray | int = 1,
-                       theta2_at_pole: np.ndarray | float = 0.0) -> MachineIK:
+                       theta2_at_pole: np.ndarray | float = 0.0, exact_fallback: bool = True) -> MachineIK:
     """Working-mode joints for tool tips (N, 3) mm and unit axes (N, 3), table frame, one angle pair.
 
     The working alpha is the root in (-alpha_max, alpha_max) of the signed form of eq. 31,
     F(alpha) = yP sqrt(R1^2 + r1^2 - 2 R1 r1 cos) + R1 sin sqrt(a^2 - X1^2) (eq. 13 with
     s1 = -1 and eq. 9), found by Newton's method from its linearisation at alpha = 0. The
     result is verified (closure equations, s_i = -1); poses where Newton did not land on a
-    working solution go through the all-solutions route.
+    working solution go through the all-solutions route, except those leg I cannot reach at
+    any tilt (X1^2 > L1^2 - (R1 - r1)^2: then eq. 9 has no real solution). Without
+    ``exact_fallback`` they are reported unreachable (a fast screen, e.g. for placement).
     """
     tip = np.atleast_2d(np.asarray(tip, dtype=float))
     axis = np.atleast_2d(np.asarray(axis, dtype=float))
@@ -149,8 +151,9 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
     good[good] = closure_ok(geom, platform[good], alpha[good], rho[good])
     joints = np.column_stack([rho, alpha - phi1, -phi2])
-    retry = np.flatnonzero(~good & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
-    if retry.size:
+    leg_one_reaches = x1sq <= k + two_rr
+    retry = np.flatnonzero(~good & leg_one_reaches & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
+    if retry.size and exact_fallback:
         exact = machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
         wm = exact.working_mode
         order = np.lexsort((np.abs(exact.alpha[wm]), exact.pose_index[wm]))
@@ -197,9 +200,7 @@ def machine_ik_all(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.n
         xp, a, b = _platform_coefficients(geom, tip, axis, phi1, phi2)
         c, s = TrigPoly.cos_sin(n)
         poly = _coupling(geom, xp + geom.D1_minus_d1, a, b, c, s)
-        candidates = real_half_angle_roots(poly.num)
-        index = np.repeat(np.arange(n), [len(r) for r in candidates])
-        alpha = np.concatenate(candidates)
+        index, alpha = real_half_angle_roots(poly.num)
         alpha = _polish(geom, xp[index] + geom.D1_minus_d1, a[index], b[index], alpha)
         platform = _platform_pose(geom, xp[index], a[index], b[index], alpha)
         order = np.argsort(index, kind="stable")

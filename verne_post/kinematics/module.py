@@ -384,9 +384,7 @@ def module_fk_all(geom: Geometry, rho: np.ndarray) -> ModuleFKSolutions:
     rho = np.atleast_2d(np.asarray(rho, dtype=float))
     c, s = TrigPoly.cos_sin(rho.shape[0])
     eliminant = _fk_elimination(geom, rho, c, s)[4]
-    candidates = real_half_angle_roots(eliminant.num)
-    index = np.repeat(np.arange(rho.shape[0]), [len(a) for a in candidates])
-    alpha = np.concatenate(candidates) if candidates else np.empty(0)
+    index, alpha = real_half_angle_roots(eliminant.num)
     alpha = _polish_alpha(geom, rho[index], alpha)
     platform = _platform_from_alpha(geom, rho[index], alpha)
     d_index, d_platform, d_alpha = _degenerate_solutions(geom, rho)

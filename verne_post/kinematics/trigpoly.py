@@ -78,34 +78,36 @@ class TrigPoly:
         return result
 
 
-def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> list[np.ndarray]:
-    """Angles (rad, in (-pi, pi]) of the real roots of each row's numerator, plus pi itself.
+def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Real roots of each row's numerator as angles: (row index (K,), angle (K,) rad in (-pi, pi]).
 
-    pi (t = infinity) is always returned as a candidate because a vanishing leading
-    coefficient hides it; callers verify every candidate against the closure equations.
-    Rows of full degree are solved together (eigenvalues of stacked companion matrices);
-    the rare row whose leading coefficient vanishes goes through ``np.roots``.
+    Every row also gets pi itself (t = infinity), because a vanishing leading coefficient
+    hides it; callers verify every candidate against the closure equations. Rows of full
+    degree are solved together (eigenvalues of stacked companion matrices); the rare row
+    whose leading coefficient vanishes goes through ``np.roots``. Rows come out in order.
     """
+    n = len(num)
     coefficients = num[:, ::-1]  # highest power first
     scale = np.max(np.abs(coefficients), axis=1)
     usable = (scale > 0) & np.isfinite(scale)
     coefficients = coefficients / np.where(usable, scale, 1.0)[:, None]
     full = usable & (np.abs(coefficients[:, 0]) > 1e-13)
-    roots: list[np.ndarray] = [np.empty(0)] * len(num)
     degree = num.shape[1] - 1
-    rows = np.flatnonzero(full)
-    if rows.size and degree > 0:
-        companion = np.zeros((rows.size, degree, degree))
-        companion[:, 0, :] = -coefficients[rows, 1:] / coefficients[rows, :1]
-        companion[:, np.arange(1, degree), np.arange(degree - 1)] = 1.0
-        for k, values in zip(rows, np.linalg.eigvals(companion), strict=True):
-            roots[k] = values
+    rows = np.flatnonzero(full) if degree > 0 else np.empty(0, int)
+    companion = np.zeros((rows.size, degree, degree))
+    companion[:, 0, :] = -coefficients[rows, 1:] / coefficients[rows, :1]
+    companion[:, np.arange(1, degree), np.arange(degree - 1)] = 1.0
+    values = np.linalg.eigvals(companion) if rows.size else np.empty((0, degree), complex)
+    index, column = np.nonzero(np.abs(values.imag) <= imag_tol * (1.0 + np.abs(values)))
+    parts_index, parts_t = [rows[index]], [values[index, column].real]
     for k in np.flatnonzero(usable & ~full):
         nonzero = np.flatnonzero(np.abs(coefficients[k]) > 1e-13)
         trimmed = coefficients[k, nonzero[0]:]
-        roots[k] = np.roots(trimmed) if trimmed.size > 1 else np.empty(0)
-    result = []
-    for values in roots:
-        real = values[np.abs(values.imag) <= imag_tol * (1.0 + np.abs(values))].real
-        result.append(np.append(2.0 * np.arctan(real), np.pi))
-    return result
+        found = np.roots(trimmed) if trimmed.size > 1 else np.empty(0, complex)
+        found = found[np.abs(found.imag) <= imag_tol * (1.0 + np.abs(found))].real
+        parts_index.append(np.full(found.size, k))
+        parts_t.append(found)
+    index = np.concatenate([*parts_index, np.arange(n)])
+    angle = np.concatenate([2.0 * np.arctan(np.concatenate(parts_t)), np.full(n, np.pi)])
+    order = np.argsort(index, kind="stable")
+    return index[order], angle[order]

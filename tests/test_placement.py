@@ -1,0 +1,161 @@
+"""Placement: the work offset it finds runs, the room it reports is the real edge, and when
+no offset works it says why. Judged by the full ``check`` (the CLI), not by the search."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import verne_post as vp
+from verne_post.api import Status, classify, pose_margins
+from verne_post.cl import read_toolpath
+from verne_post.cli import main
+from verne_post.headroom import headroom, smallest
+from verne_post.pipeline import PostOptions, check_poses
+from verne_post.placement import place
+from verne_post.poses import machine_poses
+
+DATA = Path(__file__).parent / "data"
+EXAMPLES = Path(__file__).parent.parent / "examples"
+REAL = DATA / "creo8_profilfraesen_mm.ncl"  # Creo 8, no tool length in the file
+TOOL = "50"
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(main, list(args))
+    return result.exit_code, result.stdout, result.stderr
+
+
+def check_at(path: Path, offset: np.ndarray, *extra: str) -> int:
+    return run("check", str(path), "--tool-length", TOOL, "--work-offset", *(f"{v:.4f}" for v in offset), "-q",
+               *extra)[0]
+
+
+@pytest.fixture(scope="module")
+def placed(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    report = tmp_path_factory.mktemp("place") / "place.json"
+    code, out, err = run("place", str(REAL), "--tool-length", TOOL, "--report", str(report), "-q")
+    assert code == 0, err
+    assert re.search(r"^work offset \S+ \S+ \S+ mm", out, re.M)
+    return json.loads(report.read_text())
+
+
+def test_found_offset_runs_the_real_program(placed: dict) -> None:
+    assert placed["feasible"] and placed["smallest_headroom"] > 0
+    assert check_at(REAL, np.array(placed["work_offset_mm"])) == 0  # the full check, timing included
+
+
+@pytest.mark.parametrize("axis", range(3))
+@pytest.mark.parametrize("sign", [-1, 1])
+def test_room_is_the_edge_of_the_feasible_region(placed: dict, axis: int, sign: int) -> None:
+    """Moving the part by the reported room still runs; by 1 mm more, it does not."""
+    room = placed["room_mm"]["xyz"[axis]]["minus" if sign < 0 else "plus"]
+    offset = np.array(placed["work_offset_mm"])
+    step = np.zeros(3)
+    step[axis] = sign
+    assert room > 1.0
+    assert check_at(REAL, offset + room * step, "--no-timing") == 0
+    assert check_at(REAL, offset + (room + 1.0) * step, "--no-timing") == 3
+
+
+def test_found_offset_is_a_local_optimum_of_the_whole_program(placed: dict) -> None:
+    """No offset 5 mm away (26 directions) has a larger smallest headroom over every block end
+    of the full checks: the search did not stop short of the optimum."""
+    machine = vp.load_machine()
+    options = PostOptions(tool_length=float(TOOL), plan=False)
+    zero = machine_poses(read_toolpath(REAL), machine, work_offset=(0, 0, 0), tool_length=float(TOOL))
+
+    def smallest_headroom(offset: np.ndarray) -> float:
+        from dataclasses import replace
+
+        blocks = check_poses(machine, replace(zero, tip=zero.tip + offset), options).blocks
+        return float(np.min(smallest(headroom(machine, blocks.joints, blocks.result.margins))[0]))
+
+    centre = np.array(placed["work_offset_mm"])
+    best = smallest_headroom(centre)
+    assert best == pytest.approx(placed["smallest_headroom"], abs=2e-3)
+    steps = [np.array(d, float) for d in np.ndindex(3, 3, 3) if d != (1, 1, 1)]
+    around = [smallest_headroom(centre + 5.0 * (d - 1) / np.linalg.norm(d - 1)) for d in steps]
+    assert max(around) <= best + 5e-3
+
+
+def test_the_impeller_example_is_placed_and_runs() -> None:
+    machine = vp.load_machine()
+    path = EXAMPLES / "impeller_5axis.cls"
+    zero = machine_poses(read_toolpath(path), machine, work_offset=(0, 0, 0))
+    placement = place(machine, zero, PostOptions(plan=False))
+    assert placement.feasible and placement.margin > 0.2
+    assert all(lo > 10 and hi > 10 for lo, hi in placement.room)
+    code, _, err = run("check", str(path), "--work-offset", *(f"{v:.4f}" for v in placement.offset), "-q",
+                       "--no-timing")
+    assert code == 0, err
+
+
+def test_work_offset_auto_is_recorded_in_the_gcode_header(tmp_path: Path, placed: dict) -> None:
+    out = tmp_path / "part.nc"
+    code, _, err = run("post", str(REAL), "--tool-length", TOOL, "--work-offset", "auto", "-o", str(out), "-q")
+    assert code == 0, err
+    text = out.read_text()
+    x, y, z = (float(v) for v in re.search(r"\(WORK OFFSET (\S+) (\S+) (\S+) MM", text).groups())
+    assert np.allclose([x, y, z], placed["work_offset_mm"], atol=1e-3)  # deterministic: the same as 'place'
+    assert "WORK OFFSET CHOSEN BY VERNE-POST PLACE" in text
+    assert re.search(r"PART MAY MOVE BY X -[\d.]+/\+[\d.]+ Y -[\d.]+/\+[\d.]+ Z -[\d.]+/\+[\d.]+ MM", text)
+
+
+def _cl(tmp_path: Path, name: str, operations: list[tuple[int, float, list[tuple[float, ...]]]]) -> Path:
+    lines = ["PARTNO/" + name, "UNITS/MM"]
+    for tool, length, poses in operations:
+        lines += [f"LOADTL/{tool}", f"TLDATA/MILL,10.0,0.0,{length},0.0,0.0", "RAPID"]
+        for k, pose in enumerate(poses):
+            lines.append("GOTO/" + ",".join(f"{v:.6f}" for v in pose))
+            if k == 0:
+                lines.append("FEDRAT/MMPM,1000.0")
+    path = tmp_path / f"{name}.cls"
+    path.write_text("\n".join([*lines, "FINI", ""]))
+    return path
+
+
+def _line(a: tuple[float, float, float], b: tuple[float, float, float], axis: tuple[float, float, float], n: int = 20
+          ) -> list[tuple[float, ...]]:
+    return [tuple(a[q] + (b[q] - a[q]) * t / (n - 1) for q in range(3)) + axis for t in range(n)]
+
+
+def test_no_offset_reaches_a_tilt_beyond_the_machine(tmp_path: Path) -> None:
+    tilt = math.radians(150.0)
+    path = _cl(tmp_path, "overtilt", [(1, 60.0, _line((0, 0, 0), (50, 0, 0), (math.sin(tilt), 0.0, math.cos(tilt))))])
+    code, _, err = run("place", str(path), "-q")
+    assert code == 3
+    assert len(err.strip().splitlines()) == 1
+    assert re.search(r"line 6: the tool axis is tilted 150\.0 deg", err) and "smaller tilt" in err
+
+
+def test_operations_that_need_different_offsets_are_named(tmp_path: Path) -> None:
+    vertical = (0.0, 0.0, 1.0)
+    path = _cl(tmp_path, "apart", [(1, 60.0, _line((0, 0, 0), (50, 0, 0), vertical)),
+                                   (2, 60.0, _line((0, 0, 2500), (50, 0, 2500), vertical))])
+    code, _, err = run("place", str(path), "-q")
+    assert code == 3
+    assert "tool 2 (from CL line 30) needs a different work offset" in err
+    code, _, err = run("check", str(path), "--work-offset", "auto", "-q")
+    assert code == 3 and "no work offset lets the whole program run" in err
+
+
+def test_headroom_is_negative_exactly_where_a_check_fails(machine: vp.Machine) -> None:
+    """The headroom's sign against the checks' own verdict (classify) on random joint sets."""
+    rng = np.random.default_rng(7)
+    joints = np.column_stack([rng.uniform(-50, 1350, (20000, 3)), rng.uniform(-1.7, 1.7, 20000),
+                              rng.uniform(-4, 4, 20000)])
+    fk = vp.forward_kinematics(machine, joints, tool_length=60.0)
+    found = pose_margins(machine, joints, fk.platform, fk.alpha, fk.reachable, 60.0)
+    status = classify(machine, joints, fk.reachable, found)
+    value, _ = smallest(headroom(machine, np.where(fk.reachable[:, None], joints, np.nan), found))
+    reachable = status != Status.UNREACHABLE
+    assert reachable.sum() > 5000 and (status == Status.OK).sum() > 2000
+    assert np.array_equal(value[reachable] >= 0, status[reachable] == Status.OK)
+    assert np.all(value[~reachable] < 0)
