@@ -29,7 +29,7 @@ from .api import (
     pose_margins,
     within_limits,
 )
-from .errors import InputError, UserError
+from .errors import InputError, UserError, one_line
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import Machine, load_machine
 from .tables import read_table, write_table
@@ -48,7 +48,7 @@ class _DefaultToPost(click.Group):
         try:
             return super().main(*args, standalone_mode=False, **kwargs)
         except click.ClickException as error:
-            click.echo(f"verne-post: error: {error.format_message()}", err=True)
+            click.echo(f"verne-post: error: {one_line(error.format_message())}", err=True)
             sys.exit(error.exit_code)
         except click.Abort:
             click.echo("verne-post: aborted", err=True)
@@ -332,14 +332,14 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
 
     if not quiet:
         for warning in result.warnings[:max_messages]:
-            click.echo(f"verne-post: warning: {warning}", err=True)
+            click.echo(f"verne-post: warning: {one_line(warning)}", err=True)
         if len(result.warnings) > max_messages:
             click.echo(f"verne-post: ... and {len(result.warnings) - max_messages} more warnings", err=True)
     if report_path:
         write_json(report_path, result.report(machine, options))
     if result.violations:
         for v in result.violations[:max_messages]:
-            click.echo(f"verne-post: error: {result.poses.source}:{v.line}: {v.message}", err=True)
+            click.echo(f"verne-post: error: {one_line(f'{result.poses.source}:{v.line}: {v.message}')}", err=True)
         if len(result.violations) > max_messages:
             click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
         click.echo(f"verne-post: {len(result.violations)} violation(s): nothing written", err=True)
