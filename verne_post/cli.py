@@ -335,13 +335,13 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
             click.echo(f"verne-post: warning: {one_line(warning)}", err=True)
         if len(result.warnings) > max_messages:
             click.echo(f"verne-post: ... and {len(result.warnings) - max_messages} more warnings", err=True)
-    if report_path:
+    for v in result.violations[:max_messages]:
+        click.echo(f"verne-post: error: {one_line(f'{result.poses.source}:{v.line}: {v.message}')}", err=True)
+    if len(result.violations) > max_messages:
+        click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
+    if report_path:  # after the violations: they are printed even when the report cannot be written
         write_json(report_path, result.report(machine, options))
     if result.violations:
-        for v in result.violations[:max_messages]:
-            click.echo(f"verne-post: error: {one_line(f'{result.poses.source}:{v.line}: {v.message}')}", err=True)
-        if len(result.violations) > max_messages:
-            click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
         click.echo(f"verne-post: {len(result.violations)} violation(s): nothing written", err=True)
         sys.exit(3)
 
