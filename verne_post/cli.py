@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import io
 import json
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -29,6 +30,7 @@ from .api import (
     pose_margins,
     within_limits,
 )
+from .atomic import check_writable
 from .errors import InputError, UserError, one_line
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import Machine, load_machine
@@ -74,6 +76,26 @@ machine_option = click.option("--machine", "machine_path", type=click.Path(dir_o
 tool_length_option = click.option("--tool-length", type=float, default=0.0, show_default=True,
                                   help="Tool length in mm (Delta = spindle nose distance + this).")
 radians_option = click.option("--radians", is_flag=True, help="Angles in radians instead of degrees.")
+
+
+def _check_outputs(source: str, *outputs: str | None) -> None:
+    """Fail now, not after a long run: an output that cannot be written, that is the input, or
+    two outputs that are one file (devices such as /dev/null excepted)."""
+    given = [path for path in outputs if path]
+    for k, path in enumerate(given):
+        check_writable(path)
+        for other, what in [(source, "the input file"), *((o, "another output") for o in given[:k])]:
+            if _same_file(path, other):
+                raise InputError(f"the output would overwrite {what}", path)
+
+
+def _same_file(a: str, b: str) -> bool:
+    if os.path.realpath(a) == os.path.realpath(b):
+        return not os.path.exists(a) or os.path.isfile(a)
+    try:
+        return os.path.isfile(a) and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _angle_scale(radians: bool) -> float:
@@ -193,6 +215,7 @@ def _ik_batch(machine: Machine, poses: str, output: str | None, tool_length: flo
     from .branch import solve_path
     from .cl import read_pose_csv
 
+    _check_outputs(poses, output)
     toolpath = read_pose_csv(poses)
     result = solve_path(machine, toolpath.tip, toolpath.axis, tool_length=tool_length).result
     labels = np.array([Status(s).label for s in range(len(Status))])[result.status]
@@ -267,6 +290,7 @@ def fk_command(joints_file: str | None, output: str | None, rho: tuple[float, ..
 
 
 def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: float, scale: float) -> None:
+    _check_outputs(path, output)
     columns, _ = read_table(path, JOINT_NAMES)
     joints = np.column_stack([columns[c] for c in JOINT_NAMES])
     joints[:, 3:] /= scale
@@ -368,6 +392,7 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
         raise InputError("a timed CSV needs the time-parametrisation: drop --no-timing")
     if period < 0:
         raise InputError("--period must be >= 0")
+    _check_outputs(cl_file, target, report_path)
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     if as_csv:
@@ -383,6 +408,7 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
 @user_errors
 def check_command(cl_file: str, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
+    _check_outputs(cl_file, report_path)
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     if not choices["quiet"]:

@@ -83,6 +83,10 @@ class InputError(UserError):
     """Malformed input data (CL file, CSV, YAML, command-line values): exit code 2."""
 
 
+class OutputError(UserError):
+    """An output cannot be written (missing or read-only folder, full disk): exit code 2."""
+
+
 class CheckError(UserError):
     """The program is well-formed but the machine cannot run it (limits, reach): exit code 3."""
 
