@@ -34,7 +34,7 @@ from .api import (
 from .atomic import check_writable
 from .errors import InputError, UserError, one_line, quote
 from .kinematics import machine_ik_all, module_ik_all
-from .machine import Machine, load_machine
+from .machine import MAX_TOOL_LENGTH, Machine, load_machine
 from .tables import read_table, write_table
 
 
@@ -104,7 +104,7 @@ MIN_PERIOD = 1e-4
 
 #: Magnitudes beyond any machine: coordinates (mm) and joint values (mm, degrees or radians).
 COORDINATE = Number(-1e6, 1e6)
-TOOL_LENGTH = Number(0.0, 2000.0, " mm")
+TOOL_LENGTH = Number(0.0, MAX_TOOL_LENGTH, " mm")
 
 machine_option = click.option("--machine", "machine_path", type=click.Path(dir_okay=False),
                               help="Machine YAML file (default: the shipped VERNE).")
