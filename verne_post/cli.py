@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -47,9 +48,15 @@ class _DefaultToPost(click.Group):
         return super().parse_args(ctx, args)
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
-        """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2."""
+        """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2.
+
+        Python warnings (e.g. numpy's on NaN arithmetic in rejected input) are not shown: every
+        line on stderr is one of verne-post's own messages.
+        """
         try:
-            return super().main(*args, standalone_mode=False, **kwargs)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return super().main(*args, standalone_mode=False, **kwargs)
         except click.ClickException as error:
             click.echo(f"verne-post: error: {one_line(error.format_message())}", err=True)
             sys.exit(error.exit_code)
