@@ -48,7 +48,7 @@ CL_SEEDS = sorted([*ROOT.glob("tests/data/*.cls"), *(p for p in (ROOT / "tests/d
 MACHINE_SEED = ROOT / "machines" / "verne.yaml"
 OUTCOMES = ("ok", "bad input", "violations", "crash", "hang", "stray file")
 
-NUMBER = re.compile(rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+NUMBER = re.compile(rb"(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")  # not inside a word (D1, EM16)
 SPECIAL_NUMBERS = [b"nan", b"NaN", b"-nan", b"inf", b"-inf", b"INF", b"infinity", b"1e308", b"1e309", b"-1.8e308",
                    b"0", b"-0", b"0.0", b"1e-320", b"4.9e-324", b"9" * 400, b"", b"1e", b".", b"-", b"+.5e-3", b"0x1F",
                    b"1_000", b"1,5", b"1e+", b"--1", b"2147483648", b"-9223372036854775809", b"1e-7", b"1e7"]
@@ -87,7 +87,8 @@ def _mutate_number(line: bytes, rng: random.Random, gentle: bool) -> bytes:
     match = rng.choice(found)
     if gentle:
         try:
-            value = float(match.group()) * rng.choice([rng.uniform(0.5, 2.0), 1 + rng.gauss(0, 0.05), -1.0])
+            value = float(match.group()) * rng.choice([rng.uniform(0.5, 2.0), rng.uniform(0.05, 20.0),
+                                                        1 + rng.gauss(0, 0.05), -1.0])
         except ValueError:
             value = 0.0
         new = f"{value:.6g}".encode()
@@ -194,9 +195,14 @@ def make_case(seed: int, number: int) -> Case:
     if rng.random() < 0.1:
         args.insert(0, "check")
     if machine_case:
-        machine = _seed(MACHINE_SEED)
-        for _ in range(rng.choice([1, 1, 2, 3])):
-            machine = mutate_lines(machine, rng, [machine], gentle_share=0.7)
+        machine = list(_seed(MACHINE_SEED))
+        if rng.random() < 0.6:  # a machine that may still be valid: a few numbers scaled
+            numbered = [k for k, line in enumerate(machine) if NUMBER.search(line.split(b"#")[0])]
+            for k in rng.sample(numbered, rng.randint(1, 4)):
+                machine[k] = _mutate_number(machine[k], rng, gentle=True)
+        else:
+            for _ in range(rng.choice([1, 1, 2, 3])):
+                machine = mutate_lines(machine, rng, [machine], gentle_share=0.5)
         files["m.yaml"] = b"".join(machine)
         args += ["--machine", "m.yaml"]
     absurd = rng.random() < 0.05  # options with values the CLI must refuse
