@@ -83,8 +83,6 @@ class Number(click.ParamType):
     """A finite number in [low, high] (optionally also exactly 0): NaN, infinities, values that
     overflow and absurd magnitudes are command-line mistakes, not numbers to compute with."""
 
-    name = "number"
-
     def __init__(self, low: float, high: float, unit: str = "", zero: bool = False, integer: bool = False) -> None:
         self.low, self.high, self.unit, self.zero, self.integer = low, high, unit, zero, integer
         self.name = "integer" if integer else "number"
