@@ -211,7 +211,7 @@ def test_cli_killed_while_writing_leaves_no_file(tmp_path: Path, use_tmpfile: bo
     """SIGTERM to verne-post while it writes a large timed CSV: nothing but the input remains."""
     (tmp_path / "part.cls").write_bytes(PART.read_bytes())
     code = f"from verne_post import atomic, cli; atomic.use_tmpfile = {use_tmpfile}; cli.main()"
-    process = subprocess.Popen([sys.executable, "-c", code, "part.cls", "-o", "part.csv", "--period", "0.00005",
+    process = subprocess.Popen([sys.executable, "-c", code, "part.cls", "-o", "part.csv", "--period", "0.0001",
                                 "--tool-length", "50", "--quiet"], cwd=tmp_path.resolve())
     while not _writing(process.pid, tmp_path.resolve()) and process.poll() is None:
         time.sleep(0.002)
