@@ -117,7 +117,7 @@ def test_csv_poses(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("args", "message"), [
     (["."], "is a directory"),
     (["missing.cls"], "missing.cls: file not found"),
-    (["part.cls", "--work-offset", "1", "2", "x"], "'x' is not a valid float"),
+    (["part.cls", "--work-offset", "1", "2", "x"], "'x' is not a number"),
     (["part.cls", "--frobnicate"], "No such option '--frobnicate'"),
 ])
 def test_command_line_mistakes_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:
