@@ -39,7 +39,7 @@ import tempfile
 import time
 import traceback
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -58,7 +58,6 @@ RECORD_WORDS = [b"GOTO", b"RAPID", b"FEDRAT", b"CIRCLE", b"CYCLE", b"LOAD", b"TL
                 b"END-OF-PATH", b"CUTCOM", b"PAINT"]
 JUNK = [b"\x00", b"\xff", b"\xfe\xff", b"\xef\xbb\xbf", b"\x1b[2J", b"\r", b"\x0b", b"\x0c", b"\x85",
         "\u2028".encode(), "\u202e".encode(), "é".encode(), b"\t", b"$", b"/", b",", b"(", b")", b"'", b'"', b"%"]
-TIMEOUT_SIGNAL = signal.SIGALRM
 
 
 class Hang(BaseException):
@@ -70,7 +69,7 @@ class Case:
     number: int
     files: dict[str, bytes]  # name in the input folder -> content
     args: list[str]  # with {in} and {out} for the folders
-    expected: dict[int, set[str]] = field(default_factory=dict)  # exit code -> files the output folder may hold
+    expected: dict[int, set[str]]  # exit code -> files the output folder may hold
 
 
 # ------------------------------------------------------------------------------------- mutations
@@ -328,7 +327,7 @@ def main() -> None:
 
     os.cpu_count = lambda: 1  # feed planning in this process: the per-case timer can interrupt it
     _limit_memory(args.memory_gb)
-    signal.signal(TIMEOUT_SIGNAL, _on_timer)
+    signal.signal(signal.SIGALRM, _on_timer)
     if args.case is not None:
         case = make_case(args.seed, args.case)
         print("args:", " ".join(case.args), "\nfiles:", {k: len(v) for k, v in case.files.items()})
