@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import verne_post.gcode as gcode
-from verne_post.errors import CheckError
+from verne_post.errors import CheckError, OutputError
 from verne_post.gcode import (
     MAX_COMMENT_CHARS,
     FeedRateError,
@@ -422,13 +422,13 @@ def test_write_failure_midway_never_clobbers(tmp_path: Path, monkeypatch: pytest
     monkeypatch.setattr(gcode, "_CHUNK", 50)
     monkeypatch.setattr(gcode, "_motion_text", failing)
     target = tmp_path / "out.nc"
-    with pytest.raises(OSError, match="simulated"):
+    with pytest.raises(OutputError, match=r"out\.nc: cannot write: disk full"):
         write_program(random_program(m=400), GcodeFormat(), target)
     assert list(tmp_path.iterdir()) == []  # no output, no temporary file left
 
     target.write_text("precious\n")
     calls["n"] = 0
-    with pytest.raises(OSError, match="simulated"):
+    with pytest.raises(OutputError, match=r"out\.nc: cannot write: disk full"):
         write_program(random_program(m=400), GcodeFormat(), target)
     assert target.read_text() == "precious\n"
     assert [p.name for p in tmp_path.iterdir()] == ["out.nc"]

@@ -28,7 +28,7 @@ def test_shipped_machine_matches_identified_geometry() -> None:
     assert (geom.D1_minus_d1, geom.D2_minus_d2, geom.R1, geom.r1, geom.L1, geom.R2, geom.r4, geom.L2, geom.L3,
             geom.delta, geom.da, geom.dt) == (-320.00, 240.66, 129.71, 80.22, 849.97, 190.06, 565.93, 950.37,
                                               950.90, 495.80, 2007.81, 96.91)
-    assert vp.load_machine(SHIPPED) == vp.load_machine().model_copy(update={"source": "verne.yaml"})
+    assert vp.load_machine(SHIPPED) == vp.load_machine() and vp.load_machine(SHIPPED).source == "verne.yaml"
 
 
 def test_top_level_machines_folder_is_the_shipped_file() -> None:
@@ -51,6 +51,19 @@ def test_tool_length_changes_delta() -> None:
         (lambda d: d["joints"]["theta1"].update(velocity="fast"), "joints.theta1.velocity: Input should be a valid"),
         (lambda d: d["geometry"].update(dt=float("nan")), "geometry.dt: Input should be a finite number"),
         (lambda d: d["joints"]["rho2"].update(continuous=True), "joints.rho2"),
+        (lambda d: d.update(source="other.yaml"), "source: unknown key"),
+        (lambda d: d["geometry"].update(L1=float("inf")), "geometry.L1: Input should be a finite number"),
+        (lambda d: d["joints"]["theta1"].update(velocity=float("inf")), "joints.theta1.velocity: Input should be"),
+        (lambda d: d["joints"]["rho3"].update(max=float("inf")), "joints.rho3.max: Input should be a finite number"),
+        (lambda d: d["timing"].update(rotary_feed=float("inf")), "timing.rotary_feed: Input should be a finite"),
+        (lambda d: d["pole"].update(max_theta2_rate=float("nan")), "pole.max_theta2_rate: Input should be a finite"),
+        (lambda d: d["tools"][1].update(length=float("inf")), "tools.1.length: Input should be a finite number"),
+        (lambda d: d.update(work_offset=[0, 0, float("-inf")]), "work_offset.2: Input should be a finite number"),
+        (lambda d: d["geometry"].update(L1=10**400), "geometry.L1"),
+        (lambda d: d["geometry"].update(da=1e9), "geometry.da: Input should be less than or equal to 100000"),
+        (lambda d: d["joints"]["rho1"].update(velocity=1e-12), "joints.rho1.velocity: Input should be greater"),
+        (lambda d: d["joints"]["rho1"].update(jerk=1e300), "joints.rho1.jerk: Input should be less than"),
+        (lambda d: d.update(name=""), "name: String should have at least 1 character"),
     ],
 )
 def test_bad_machine_files(tmp_path: Path, mutate, message: str) -> None:
@@ -71,3 +84,52 @@ def test_not_yaml(tmp_path: Path) -> None:
         vp.load_machine(path)
     with pytest.raises(InputError, match="cannot read machine file"):
         vp.load_machine(tmp_path / "missing.yaml")
+
+
+def _shipped_text() -> str:
+    return SHIPPED.read_text()
+
+
+@pytest.mark.parametrize(("text", "line", "message"), [
+    (_shipped_text().replace("  R1: 129.71\n", "  R1: 129.71\n  R1: 130.0\n"), 11,
+     "duplicate key 'R1' (first at line 10)"),
+    (_shipped_text() + "name: OTHER\n", None, "duplicate key 'name' (first at line 4)"),
+    (_shipped_text().replace("L1: 849.97", "L1: .inf"), None, "geometry.L1: Input should be a finite number"),
+    (_shipped_text().replace("da: 2007.81", "da: .nan"), None, "geometry.da: Input should be a finite number"),
+    (_shipped_text().replace("L2: 950.37", "L2: 1.0e+400"), None, "geometry.L2: Input should be a finite number"),
+    (_shipped_text() + "extra: " + "[" * 100000 + "]" * 100000 + "\n", 77, "nested deeper than 16 levels"),
+    ("a: &a [x, x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\n"
+     "c: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: &d [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]\n"
+     "e: [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]\n", None, "more than 100000 values (aliases expanded)"),
+    ("&a [*a]\n", 1, "more than 100000 values"),
+    (_shipped_text() + "#" * (1 << 20), None, "machine file larger than 1048576 bytes"),
+])
+def test_malformed_machine_yaml(tmp_path: Path, text: str, line: int | None, message: str) -> None:
+    path = _write(tmp_path, text)
+    with pytest.raises(InputError) as error:
+        vp.load_machine(path)
+    where = f"{path}:{line}: " if line else f"{path}"
+    assert str(error.value).startswith(where) and message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_unreachable_reference_pose_is_rejected_with_the_reason(tmp_path: Path) -> None:
+    """Leg I rods of 300 mm: brute force over the tilt (axis along the table normal, so alpha =
+    theta1) shows a rod whose horizontal distance to its guideway exceeds its length at every
+    tilt, in the independent model; the loader must refuse the file and say why."""
+    import numpy as np
+    from independent import platform_from_tool
+
+    data = _shipped()
+    data["geometry"]["L1"] = 300.0
+    geom = vp.Geometry(**data["geometry"])
+    theta1 = np.linspace(-np.pi, np.pi, 20001)
+    n = len(theta1)
+    platform, alpha = platform_from_tool(geom, np.zeros((n, 3)), np.tile([0.0, 0.0, 1.0], (n, 1)), theta1,
+                                         np.zeros(n))
+    g = geom
+    horizontal = np.hypot(platform[:, 0] + g.D1_minus_d1, platform[:, 1] + g.R1 * np.cos(alpha) - g.r1)
+    assert np.all(horizontal > g.L1)
+    with pytest.raises(InputError) as error:
+        vp.load_machine(_write(tmp_path, data))
+    assert "geometry: Value error, the reference pose" in str(error.value)
+    assert "not reachable in the working mode: no assembly of the legs reaches it" in str(error.value)

@@ -36,6 +36,7 @@ def test_good_program_is_written(tmp_path: Path) -> None:
         ("GOTO/0,0,50,0,0,1\nGOTO/1,2x,3\n", 8, "2x"),
         ("GOTO/0,0,50,0,0,1\nGOTO/1,nan,3\n", 8, "NaN"),
         ("GOTO/0,0,50,0,0,0\n", 7, "zero length"),
+        ("FEDRAT/IPM,4.9e-324\nGOTO/0,0,50,0,0,1\nGOTO/1,0,50,0,0,1\n", 9, "below the slowest usable"),
     ],
 )
 def test_malformed_cl(tmp_path: Path, body: str, line: int, reason: str) -> None:
@@ -116,7 +117,7 @@ def test_csv_poses(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("args", "message"), [
     (["."], "is a directory"),
     (["missing.cls"], "missing.cls: file not found"),
-    (["part.cls", "--work-offset", "1", "2", "x"], "'x' is not a valid float"),
+    (["part.cls", "--work-offset", "1", "2", "x"], "'x' is not a number"),
     (["part.cls", "--frobnicate"], "No such option '--frobnicate'"),
 ])
 def test_command_line_mistakes_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:
@@ -126,3 +127,25 @@ def test_command_line_mistakes_are_one_line(tmp_path: Path, args: list[str], mes
     assert result.returncode == 2
     assert result.stderr.startswith("verne-post: error: ") and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_report_of_a_failed_run(tmp_path: Path) -> None:
+    """Exit 3 with --report: every violation printed, the report written as strict JSON (null
+    where a number is undefined, e.g. the time of a rapid to a pose out of reach)."""
+    import json
+
+    body = "GOTO/0,0,50,0,0,1\nRAPID\nGOTO/3000,0,50,0,0,1\nGOTO/0,0,50,0,0,1\n"
+    result = run(tmp_path, HEADER + body + "FINI\n", "--report", str(tmp_path / "r.json"))
+    assert result.returncode == 3 and "Traceback" not in result.stderr
+    printed = [line for line in result.stderr.splitlines() if line.startswith("verne-post: error: ")]
+    assert printed and "part.cls:9: pose is out of the machine's reach" in printed[0]
+
+    def no_constants(name: str) -> None:
+        raise AssertionError(f"{name} in the report")
+
+    report = json.loads((tmp_path / "r.json").read_text(), parse_constant=no_constants)
+    assert report["ok"] is False
+    source = report["source"]
+    assert [f"verne-post: error: {source}:{v['line']}: {v['message']}" for v in report["violations"]] == printed
+    assert not (tmp_path / "part.nc").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["part.cls", "r.json"]

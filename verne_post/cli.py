@@ -10,7 +10,10 @@ import contextlib
 import functools
 import io
 import json
+import math
+import os
 import sys
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,9 +33,10 @@ from .api import (
     pose_margins,
     within_limits,
 )
-from .errors import InputError, UserError
+from .atomic import check_writable
+from .errors import InputError, UserError, one_line, quote
 from .kinematics import machine_ik_all, module_ik_all
-from .machine import Machine, load_machine
+from .machine import MAX_TOOL_LENGTH, Machine, load_machine
 from .tables import read_table, write_table
 
 if TYPE_CHECKING:
@@ -48,11 +52,17 @@ class _DefaultToPost(click.Group):
         return super().parse_args(ctx, _auto_offset(args))
 
     def main(self, *args: Any, **kwargs: Any) -> Any:
-        """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2."""
+        """Command-line mistakes as one line (``verne-post: error: ...``), exit code 2.
+
+        Python warnings (e.g. numpy's on NaN arithmetic in rejected input) are not shown: every
+        line on stderr is one of verne-post's own messages.
+        """
         try:
-            return super().main(*args, standalone_mode=False, **kwargs)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return super().main(*args, standalone_mode=False, **kwargs)
         except click.ClickException as error:
-            click.echo(f"verne-post: error: {error.format_message()}", err=True)
+            click.echo(f"verne-post: error: {one_line(error.format_message())}", err=True)
             sys.exit(error.exit_code)
         except click.Abort:
             click.echo("verne-post: aborted", err=True)
@@ -86,11 +96,63 @@ def user_errors(function: Callable[..., Any]) -> Callable[..., Any]:
     return wrapper
 
 
+class Number(click.ParamType):
+    """A finite number in [low, high] (optionally also exactly 0): NaN, infinities, values that
+    overflow and absurd magnitudes are command-line mistakes, not numbers to compute with."""
+
+    def __init__(self, low: float, high: float, unit: str = "", zero: bool = False, integer: bool = False) -> None:
+        self.low, self.high, self.unit, self.zero, self.integer = low, high, unit, zero, integer
+        self.name = "integer" if integer else "number"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> float | int:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            number = value
+        else:
+            try:
+                number = int(value) if self.integer else float(value)
+            except ValueError:
+                self.fail(f"{quote(value)} is not {'an integer' if self.integer else 'a number'}", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{quote(value)} is not a finite number", param, ctx)
+        if not (self.low <= number <= self.high or (self.zero and number == 0)):
+            bounds = f"{self.low} to {self.high}" if self.integer else f"{self.low:g} to {self.high:g}"
+            allowed = f"0 or {bounds}" if self.zero else bounds
+            self.fail(f"{quote(value)} is out of range ({allowed}{self.unit})", param, ctx)
+        return number
+
+
+#: Finest timed-CSV period (s): below any controller's servo period; keeps the output finite.
+MIN_PERIOD = 1e-4
+
+#: Magnitudes beyond any machine: coordinates (mm) and joint values (mm, degrees or radians).
+COORDINATE = Number(-1e6, 1e6)
+TOOL_LENGTH = Number(0.0, MAX_TOOL_LENGTH, " mm")
+
 machine_option = click.option("--machine", "machine_path", type=click.Path(dir_okay=False),
                               help="Machine YAML file (default: the shipped VERNE).")
-tool_length_option = click.option("--tool-length", type=float, default=0.0, show_default=True,
+tool_length_option = click.option("--tool-length", type=TOOL_LENGTH, default=0.0, show_default=True,
                                   help="Tool length in mm (Delta = spindle nose distance + this).")
 radians_option = click.option("--radians", is_flag=True, help="Angles in radians instead of degrees.")
+
+
+def _check_outputs(source: str, *outputs: str | None) -> None:
+    """Fail now, not after a long run: an output that cannot be written, that is the input, or
+    two outputs that are one file (devices such as /dev/null excepted)."""
+    given = [path for path in outputs if path]
+    for k, path in enumerate(given):
+        check_writable(path)
+        for other, what in [(source, "the input file"), *((o, "another output") for o in given[:k])]:
+            if _same_file(path, other):
+                raise InputError(f"the output would overwrite {what}", path)
+
+
+def _same_file(a: str, b: str) -> bool:
+    if os.path.realpath(a) == os.path.realpath(b):
+        return not os.path.exists(a) or os.path.isfile(a)
+    try:
+        return os.path.isfile(a) and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _angle_scale(radians: bool) -> float:
@@ -178,9 +240,9 @@ def _module_solutions_json(machine: Machine, platform: np.ndarray, everything: b
 @main.command("ik")
 @click.argument("poses", required=False, type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (batch mode; default stdout).")
-@click.option("--tip", nargs=3, type=float, help="Tool tip X Y Z in mm, table frame.")
-@click.option("--axis", nargs=3, type=float, help="Tool axis I J K, table frame (tip towards spindle).")
-@click.option("--platform", nargs=3, type=float, help="Platform centre X Y Z in mm, base frame (module only).")
+@click.option("--tip", nargs=3, type=COORDINATE, help="Tool tip X Y Z in mm, table frame.")
+@click.option("--axis", nargs=3, type=COORDINATE, help="Tool axis I J K, table frame (tip towards spindle).")
+@click.option("--platform", nargs=3, type=COORDINATE, help="Platform centre X Y Z in mm, base frame (module only).")
 @click.option("--all", "everything", is_flag=True, help="All solutions, not only the machine's working mode.")
 @machine_option
 @tool_length_option
@@ -214,6 +276,7 @@ def _ik_batch(machine: Machine, poses: str, output: str | None, tool_length: flo
     from .branch import solve_path
     from .cl import read_pose_csv
 
+    _check_outputs(poses, output)
     toolpath = read_pose_csv(poses)
     result = solve_path(machine, toolpath.tip, toolpath.axis, tool_length=tool_length).result
     labels = np.array([Status(s).label for s in range(len(Status))])[result.status]
@@ -244,8 +307,8 @@ def _write_csv(table: dict[str, np.ndarray], output: str | None, formats: dict[s
 @main.command("fk")
 @click.argument("joints_file", metavar="JOINTS.csv", required=False, type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (batch mode; default stdout).")
-@click.option("--rho", nargs=3, type=float, help="Slider positions RHO1 RHO2 RHO3 in mm.")
-@click.option("--theta", nargs=2, type=float, help="Table angles THETA1 THETA2 (degrees unless --radians).")
+@click.option("--rho", nargs=3, type=COORDINATE, help="Slider positions RHO1 RHO2 RHO3 in mm.")
+@click.option("--theta", nargs=2, type=COORDINATE, help="Table angles THETA1 THETA2 (degrees unless --radians).")
 @click.option("--all", "everything", is_flag=True, help="All assembly modes, not only the machine's.")
 @machine_option
 @tool_length_option
@@ -288,6 +351,7 @@ def fk_command(joints_file: str | None, output: str | None, rho: tuple[float, ..
 
 
 def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: float, scale: float) -> None:
+    _check_outputs(path, output)
     columns, _ = read_table(path, JOINT_NAMES)
     joints = np.column_stack([columns[c] for c in JOINT_NAMES])
     joints[:, 3:] /= scale
@@ -322,18 +386,18 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
     options = [
         click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False)),
         machine_option,
-        click.option("--tool-length", type=float, default=None,
+        click.option("--tool-length", type=TOOL_LENGTH, default=None,
                      help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
-        click.option("--work-offset", nargs=3, type=float, default=None,
+        click.option("--work-offset", nargs=3, type=Number(-1e4, 1e4, " mm"), default=None,
                      help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
                           "offset with the most room to every limit (see 'verne-post place')."),
         click.option("--auto-offset", is_flag=True, hidden=True),
         click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
-        click.option("--tol", type=float, default=0.005, show_default=True,
+        click.option("--tol", type=Number(1e-6, 10.0, " mm"), default=0.005, show_default=True,
                      help="Tool tip deviation allowed between blocks, mm."),
-        click.option("--axis-tol", type=float, default=0.05, show_default=True,
+        click.option("--axis-tol", type=Number(1e-6, 10.0, " deg"), default=0.05, show_default=True,
                      help="Tool axis deviation allowed between blocks, degrees."),
-        click.option("--arc-tol", type=float, default=0.001, show_default=True,
+        click.option("--arc-tol", type=Number(1e-6, 10.0, " mm"), default=0.001, show_default=True,
                      help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
         *_reader_options,
         click.option("--report", "report_path", type=click.Path(dir_okay=False),
@@ -342,7 +406,7 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
         click.option("--no-timing", is_flag=True,
                      help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
         click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
-        click.option("--max-messages", type=int, default=20, show_default=True,
+        click.option("--max-messages", type=Number(0, 10**6, integer=True), default=20, show_default=True,
                      help="Violations printed before the count."),
     ]
     for option in reversed(options):
@@ -355,8 +419,6 @@ def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing
     """Load the machine and run every stage but writing; a progress bar on a terminal."""
     from .pipeline import PostOptions, postprocess
 
-    if min(choices["tol"], choices["axis_tol"], choices["arc_tol"]) <= 0:
-        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
     machine = load_machine(machine_path)
@@ -394,9 +456,14 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
 
     if not quiet:
         for warning in result.warnings[:max_messages]:
-            click.echo(f"verne-post: warning: {warning}", err=True)
+            click.echo(f"verne-post: warning: {one_line(warning)}", err=True)
         if len(result.warnings) > max_messages:
             click.echo(f"verne-post: ... and {len(result.warnings) - max_messages} more warnings", err=True)
+    for v in result.violations[:max_messages]:
+        click.echo(f"verne-post: error: {one_line(f'{result.poses.source}:{v.line}: {v.message}')}", err=True)
+    if len(result.violations) > max_messages:
+        click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
+    # the report after the violations: they are printed even when the report cannot be written
     if report_path and report_path.lower().endswith((".html", ".htm")):
         from .report_html import write_html_report
 
@@ -404,10 +471,6 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
     elif report_path:
         write_json(report_path, result.report(machine, options))
     if result.violations:
-        for v in result.violations[:max_messages]:
-            click.echo(f"verne-post: error: {result.poses.source}:{v.line}: {v.message}", err=True)
-        if len(result.violations) > max_messages:
-            click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
         click.echo(f"verne-post: {len(result.violations)} violation(s): nothing written", err=True)
         sys.exit(3)
 
@@ -417,7 +480,7 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
               help="Output file: G-code (default PART.nc), or a timed CSV when it ends in .csv.")
 @click.option("--format", "output_format", type=click.Choice(["gcode", "csv"]), default=None,
               help="Output format (default: from the output file's suffix).")
-@click.option("--period", type=float, default=0.001, show_default=True,
+@click.option("--period", type=Number(MIN_PERIOD, 60.0, " s", zero=True), default=0.001, show_default=True,
               help="Timed CSV sample period in s; 0 gives one row per block end.")
 @click.option("--no-verify", is_flag=True,
               help="Skip reading the G-code back and verifying it with the forward kinematics before writing.")
@@ -437,8 +500,7 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
     as_csv = (output_format or ("csv" if target.lower().endswith(".csv") else "gcode")) == "csv"
     if as_csv and choices["no_timing"]:
         raise InputError("a timed CSV needs the time-parametrisation: drop --no-timing")
-    if period < 0:
-        raise InputError("--period must be >= 0")
+    _check_outputs(cl_file, target, report_path)
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     if as_csv:
@@ -458,6 +520,7 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
 @user_errors
 def check_command(cl_file: str, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
+    _check_outputs(cl_file, report_path)
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     if not choices["quiet"]:

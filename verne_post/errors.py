@@ -2,6 +2,61 @@
 
 from __future__ import annotations
 
+import re
+import unicodedata
+
+#: Longest quoted token kept whole in a message (characters after escaping); longer ones are cut.
+MAX_TOKEN_CHARS = 40
+
+#: Longest reason kept whole: a message stays one readable line whatever the input held.
+MAX_REASON_CHARS = 300
+
+# A token quoted in a message: 'text' not inside a word (so "machine's" does not open one).
+_QUOTED = re.compile(r"(?<!\w)'(.*?)'(?!\w)", re.DOTALL)
+
+# Characters that would break a message over lines or act on a terminal: C0/C1 controls,
+# the Unicode line and paragraph separators and the bidirectional/format controls.
+_UNPRINTABLE_CATEGORIES = ("Cc", "Zl", "Zp", "Cf", "Cs", "Co", "Cn")
+
+
+def _escape_char(ch: str) -> str:
+    if unicodedata.category(ch) not in _UNPRINTABLE_CATEGORIES:
+        return ch
+    code = ord(ch)
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}"
+
+
+def _escaped(text: str, limit: int | None = None) -> str:
+    """``text`` with every unprintable character escaped, cut to ``limit`` characters with '...'."""
+    pieces = [_escape_char(ch) for ch in text]
+    if limit is None or sum(map(len, pieces)) <= limit:
+        return "".join(pieces)
+    kept, size = [], 0
+    for piece in pieces:  # never cut inside an escape sequence
+        if size + len(piece) > limit - 3:
+            break
+        kept.append(piece)
+        size += len(piece)
+    return "".join(kept) + "..."
+
+
+def one_line(text: str, limit: int | None = None) -> str:
+    """``text`` as one printable line: control and line-separator characters escaped (a newline
+    reads ``\\x0a``), each quoted token cut to :data:`MAX_TOKEN_CHARS`, the whole to ``limit``."""
+    out, position = [], 0
+    for match in _QUOTED.finditer(text):
+        out.append(_escaped(text[position:match.start()]))
+        out.append(f"'{_escaped(match.group(1), MAX_TOKEN_CHARS)}'")
+        position = match.end()
+    out.append(_escaped(text[position:]))
+    line = "".join(out)
+    return line if limit is None or len(line) <= limit else line[: limit - 3] + "..."
+
+
+def quote(token: object) -> str:
+    """``token`` in single quotes for a message (shortened and escaped by :func:`one_line`)."""
+    return f"'{_escaped(str(token), MAX_TOKEN_CHARS)}'"
+
 
 class UserError(Exception):
     """A mistake in the user's input (file, option or configuration), never a bug.
@@ -21,11 +76,15 @@ class UserError(Exception):
         where = ""
         if self.source is not None:
             where = f"{self.source}:{self.line}: " if self.line is not None else f"{self.source}: "
-        return f"{where}{self.reason}"
+        return _escaped(where) + one_line(self.reason, MAX_REASON_CHARS)
 
 
 class InputError(UserError):
     """Malformed input data (CL file, CSV, YAML, command-line values): exit code 2."""
+
+
+class OutputError(UserError):
+    """An output cannot be written (missing or read-only folder, full disk): exit code 2."""
 
 
 class CheckError(UserError):

@@ -12,14 +12,27 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .errors import InputError
 
-_STRICT = ConfigDict(extra="forbid", frozen=True)
-Length = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+# Every number finite (YAML's .inf and .nan are refused), unknown keys refused.
+_STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+#: Largest magnitude of a length or position in a machine file (mm; 100 m), and of a joint
+#: position (mm or degrees): beyond any machine tool, and far from float overflow in the kinematics.
+MAX_MM = 1e5
+#: Longest tool (mm, spindle nose to tip) in a machine file or on the command line.
+MAX_TOOL_LENGTH = 2000.0
+Length = Annotated[float, Field(gt=0, le=MAX_MM)]
+Finite = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
+# Joint rates per s, per s^2, per s^3 (mm or degrees): slow enough to be a mistake, or beyond
+# any drive. The floor keeps durations, and so the outputs, finite.
+Velocity = Annotated[float, Field(ge=1e-3, le=1e6)]
+Acceleration = Annotated[float, Field(ge=1e-3, le=1e8)]
+Jerk = Annotated[float, Field(ge=1e-3, le=1e10)]
 
 
 @dataclass(frozen=True)
@@ -79,6 +92,25 @@ class GeometryConfig(BaseModel):
             raise ValueError("r1 must be smaller than R1 (leg I rods would always cross)")
         return self
 
+    @model_validator(mode="after")
+    def _reference_pose_is_reachable(self) -> GeometryConfig:
+        """The reference pose (tool tip at the table origin, axis along the table normal, no
+        tool: the spindle nose at the origin) must be reachable in the working mode; otherwise
+        the numbers describe no working VERNE, whatever the joint limits."""
+        from .kinematics import machine_ik_all, machine_ik_working
+
+        geom = Geometry(**self.model_dump())
+        tip, axis = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
+        if machine_ik_working(geom, tip, axis).reachable[0]:
+            return self
+        if len(machine_ik_all(geom, tip, axis).alpha) == 0:
+            why = "no assembly of the legs reaches it (rod lengths L1, L2, L3 against da, dt and spindle_nose)"
+        else:
+            why = "it is reached only outside the working mode (a slider below its platform point, or leg I rods " \
+                  "crossed)"
+        raise ValueError(f"the reference pose (spindle nose at the table origin, axis along the table normal) is not "
+                         f"reachable in the working mode: {why}")
+
 
 class JointLimits(BaseModel):
     """One joint: position range (mm or degrees) and its velocity/acceleration/jerk limits (per s)."""
@@ -87,9 +119,9 @@ class JointLimits(BaseModel):
     min: Finite | None = None
     max: Finite | None = None
     continuous: bool = False
-    velocity: PositiveFloat
-    acceleration: PositiveFloat
-    jerk: PositiveFloat
+    velocity: Velocity
+    acceleration: Acceleration
+    jerk: Jerk
 
     @model_validator(mode="after")
     def _range(self) -> JointLimits:
@@ -127,26 +159,27 @@ class Singularity(BaseModel):
     serial_min: Annotated[float, Field(ge=0, lt=1)]
     parallel_min: Annotated[float, Field(ge=0, lt=1)]
     machine_min: Annotated[float, Field(ge=0, lt=1)]
-    rod_clearance_min: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    rod_clearance_min: Annotated[float, Field(ge=0, le=MAX_MM)]
 
 
 class Pole(BaseModel):
     model_config = _STRICT
     cone: Annotated[float, Field(gt=0, lt=90)]
-    max_theta2_rate: PositiveFloat
+    max_theta2_rate: Annotated[float, Field(gt=0, le=1e6)]
 
 
 class TimingConfig(BaseModel):
     """Time-parametrisation settings."""
 
     model_config = _STRICT
-    rotary_feed: PositiveFloat = 3600.0  # deg/min: rotary speed of blocks where the tip stands still
+    # deg/min: rotary speed of blocks where the tip stands still
+    rotary_feed: Annotated[float, Field(ge=1e-3, le=1e8)] = 3600.0
     corner_angle: Annotated[float, Field(gt=0, le=180)] = 30.0  # deg: sharper corners stop the motion
 
 
 class Tool(BaseModel):
     model_config = _STRICT
-    length: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    length: Annotated[float, Field(ge=0, le=MAX_TOOL_LENGTH)]
 
 
 class GcodeConfig(BaseModel):
@@ -155,23 +188,28 @@ class GcodeConfig(BaseModel):
     angular_decimals: Annotated[int, Field(ge=0, le=8)] = 4
     feed_decimals: Annotated[int, Field(ge=0, le=8)] = 5
     block_numbers: bool = False
-    block_number_step: Annotated[int, Field(ge=1)] = 10
+    block_number_step: Annotated[int, Field(ge=1, le=10**6)] = 10
 
 
 class Machine(BaseModel):
     """A whole machine file. Lengths mm, angles degrees (as written in the YAML)."""
 
     model_config = _STRICT
-    name: str
+    name: Annotated[str, Field(min_length=1, max_length=200)]
     geometry: GeometryConfig
     joints: Joints
     singularity: Singularity
     pole: Pole
-    tools: dict[Annotated[int, Field(ge=0)], Tool] = Field(default_factory=dict)
+    tools: dict[Annotated[int, Field(ge=0, le=10**9)], Tool] = Field(default_factory=dict)
     work_offset: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     gcode: GcodeConfig = GcodeConfig()
     timing: TimingConfig = TimingConfig()
-    source: str = "verne.yaml"
+    _source: str = PrivateAttr(default="verne.yaml")
+
+    @property
+    def source(self) -> str:
+        """Name of the machine file (set by :func:`load_machine`, not a key of the file)."""
+        return self._source
 
     def kinematic_geometry(self, tool_length: float = 0.0) -> Geometry:
         """The :class:`Geometry` for the kinematics with the given tool length (mm)."""
@@ -197,26 +235,94 @@ def _format_validation_error(error: ValidationError) -> str:
     return f"{path}: {message}{more}"
 
 
+#: Bounds on a machine file: bytes, nesting depth, and values (aliases expanded).
+MAX_FILE_BYTES = 1 << 20
+MAX_DEPTH = 16
+MAX_VALUES = 100_000
+
+
+class _MachineLoader(yaml.SafeLoader):
+    """YAML's safe loader that refuses a key given twice in one mapping (YAML would silently
+    keep the last one: a machine file with two ``L1:`` is a mistake, not a choice)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        first: dict[object, int] = {}
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                line = first.setdefault(key, key_node.start_mark.line + 1)
+            except TypeError:  # an unhashable key: the safe loader reports it
+                continue
+            if line != key_node.start_mark.line + 1:
+                raise yaml.constructor.ConstructorError(None, None, f"duplicate key {key!r} (first at line {line})",
+                                                        key_node.start_mark)
+        return super().construct_mapping(node, deep)
+
+
+def _parse_yaml(text: str, source: str) -> object:
+    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`."""
+    try:
+        depth = 0
+        for event in yaml.parse(text, Loader=_MachineLoader):  # the event stream: no recursion yet
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    raise InputError(f"nested deeper than {MAX_DEPTH} levels", source, event.start_mark.line + 1)
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+        loader = _MachineLoader(text)
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                return None
+            _count_values(node, source)
+            return loader.construct_document(node)
+        finally:
+            loader.dispose()
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(f"invalid YAML: {getattr(exc, 'problem', None) or exc}", source,
+                         None if mark is None else mark.line + 1) from None
+
+
+def _count_values(root: yaml.Node, source: str) -> None:
+    """Refuse more than :data:`MAX_VALUES` values counting every alias use (an alias bomb)."""
+    stack, count = [root], 0
+    while stack:
+        node = stack.pop()
+        count += 1
+        if count > MAX_VALUES:
+            raise InputError(f"more than {MAX_VALUES} values (aliases expanded)", source, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            stack.extend(child for pair in node.value for child in pair)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+
+
 def load_machine(path: str | Path | None = None) -> Machine:
     """Read and validate a machine YAML file; ``None`` gives the VERNE shipped with the package."""
     if path is None:
-        text = (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_text()
+        raw = (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_bytes()
         source = DEFAULT_MACHINE
     else:
         source = str(path)
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise InputError(f"cannot read machine file: {exc}", source) from None
+            with open(path, "rb") as handle:
+                raw = handle.read(MAX_FILE_BYTES + 1)
+        except OSError as exc:
+            raise InputError(f"cannot read machine file: {exc.strerror or exc}", source) from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise InputError(f"machine file larger than {MAX_FILE_BYTES} bytes", source)
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        line = getattr(getattr(exc, "problem_mark", None), "line", None)
-        raise InputError(f"invalid YAML: {getattr(exc, 'problem', exc)}", source,
-                         None if line is None else line + 1) from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError("machine file is not UTF-8 text", source) from None
+    data = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)
     try:
-        return Machine.model_validate({**data, "source": Path(source).name})
+        machine = Machine.model_validate(data)
     except ValidationError as exc:
         raise InputError(f"invalid machine: {_format_validation_error(exc)}", source) from None
+    machine._source = Path(source).name
+    return machine

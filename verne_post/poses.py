@@ -64,6 +64,11 @@ def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, s
                      f"machine's tool table, or with --tool-length", source, change.line)
 
 
+#: Slowest feed (mm/min, or 1/min in inverse time) planned: slower is a mistake, and would
+#: round to zero in the planner's mm/s.
+MIN_FEED = 1e-6
+
+
 def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[float, float, float] | None = None,
                   tool_length: float | None = None) -> MachinePoses:
     """Table-frame poses with tool lengths and continuity sequences (see module docstring)."""
@@ -91,6 +96,12 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
         k = int(np.argmax(missing_feed))
         raise InputError("feed move without a programmed feed (FEDRAT, or a feed column in a CSV)", toolpath.source,
                          int(toolpath.line[k]))
+    too_slow = ~toolpath.rapid & (toolpath.feed < MIN_FEED)
+    too_slow[0] = False
+    if too_slow.any():
+        k = int(np.argmax(too_slow))
+        raise InputError(f"feed {toolpath.feed[k]:.3g} per minute is below the slowest usable, {MIN_FEED:g}",
+                         toolpath.source, int(toolpath.line[k]))
     boundary = toolpath.rapid.copy()
     boundary[[c.index for c in changes if c.index < n]] = True
     boundary[1:] |= toolpath.inverse_time[1:] != toolpath.inverse_time[:-1]

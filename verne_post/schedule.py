@@ -114,22 +114,38 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     return Schedule(duration, tuple(Segment(a, b, r, p, float(start[a])) for a, b, r, p in planned))
 
 
+#: Samples per piece of a feed's time law, per rapid, and per evaluation in limit_ratios.
+_PIECE_SAMPLES, _RAPID_SAMPLES, _CHUNK = 64, 20_000, 200_000
+
+
 def limit_ratios(schedule: Schedule, limits: Limits, period: float = 0.002) -> np.ndarray:
     """Largest |velocity|, |acceleration|, |jerk| over their limits, (3, 5) per joint, sampled
-    every ``period`` s (jerk of rapids by differences of their acceleration)."""
+    every ``period`` s (jerk of rapids by differences of their acceleration).
+
+    The samples are bounded whatever the durations (a very slow feed lasts hours): a feed's time
+    law is sampled at the ends of its pieces and at most 64 times within each (where it is one
+    cubic), a rapid at most 20,000 times.
+    """
     worst = np.zeros((3, 5))
     for segment in schedule.segments:
         plan = segment.plan
-        t = np.linspace(0.0, plan.total, max(int(np.ceil(plan.total / period)) + 1, 2))
         if isinstance(plan, FeedPlan):
-            _, qd, qdd, qddd = plan.sample_all(t)
+            ends = np.clip(plan.profile.x, 0.0, plan.total)
+            h = np.diff(ends)
+            count = np.clip(np.ceil(h / period), 1, _PIECE_SAMPLES).astype(int)
+            owner = np.repeat(np.arange(len(h)), count)
+            step = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+            t = np.r_[ends[:-1][owner] + h[owner] * step / count[owner], plan.total]
+            rates = (plan.sample_all(chunk)[1:] for chunk in np.array_split(t, -(-len(t) // _CHUNK)))
         else:
+            t = np.linspace(0.0, plan.total, int(np.clip(np.ceil(plan.total / period) + 1, 2, _RAPID_SAMPLES)))
             _, qd, qdd = plan.sample(t)
-            qddd = np.diff(qdd, axis=0) / max(t[1] - t[0], 1e-12)
-        for k, (values, limit) in enumerate(((qd, limits.velocity), (qdd, limits.acceleration),
-                                             (qddd, limits.jerk))):
-            if len(values):
-                worst[k] = np.maximum(worst[k], np.max(np.abs(values), axis=0) / limit)
+            rates = iter([(qd, qdd, np.diff(qdd, axis=0) / max(t[1] - t[0], 1e-12))])
+        for chunk in rates:
+            for k, (values, limit) in enumerate(zip(chunk, (limits.velocity, limits.acceleration, limits.jerk),
+                                                    strict=True)):
+                if len(values):
+                    worst[k] = np.maximum(worst[k], np.max(np.abs(values), axis=0) / limit)
     return worst
 
 

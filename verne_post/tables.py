@@ -79,9 +79,23 @@ def write_table(path: str | os.PathLike[str], columns: dict[str, np.ndarray], fo
 
 
 def write_json(path: str | os.PathLike[str], data: object) -> None:
-    """Write ``data`` as indented JSON, atomically."""
+    """Write ``data`` as indented JSON, atomically; undefined numbers (NaN, inf) as null."""
     import json
 
     with atomic_write(Path(path)) as handle:
-        json.dump(data, handle, indent=2, allow_nan=False)
+        json.dump(_json_ready(data), handle, indent=2, allow_nan=False)
         handle.write("\n")
+
+
+def _json_ready(data: object) -> object:
+    """``data`` with every non-finite float replaced by None (JSON has no NaN) and numpy
+    scalars as Python numbers."""
+    if isinstance(data, dict):
+        return {key: _json_ready(value) for key, value in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [_json_ready(value) for value in data]
+    if isinstance(data, np.generic):
+        data = data.item()
+    if isinstance(data, float) and not math.isfinite(data):
+        return None
+    return data

@@ -91,6 +91,7 @@ _MIN_INTERVALS = 32
 _MAX_INTERVALS_PER_BLOCK = 1.0  # toppra grid intervals per block, on average at most (plus a constant)
 # (acceleration factor, time-scale factor) tried in turn when toppra fails numerically
 _TOPPRA_RETRIES = ((1.0, 1.0), (0.999, 0.1), (0.99, 0.43), (0.98, 2.3), (0.97, 10.0))
+_MAX_PIECE_SAMPLES = 64  # verification samples per piece of the time law (see _verify)
 _VERIFY_TOL = 1e-6  # relative excess tolerated by the verification (rounding)
 _SHRINK = 0.97  # extra factor applied when lowering caps after a violation
 
@@ -649,8 +650,10 @@ class _FeedPlanner:
         b = profile.x
         h = np.diff(b)
         fill_dt = max(self.w / 8.0, 1e-3) if self.jerk else 5e-3
-        gaps = np.ceil(h / fill_dt).astype(int)
-        gaps = np.maximum(gaps, 2)
+        # A piece lies within one grid interval, where the path and the cubic s(t) are smooth: a
+        # bounded number of samples resolves it however long it lasts (a very slow feed gives
+        # pieces of hours, which at fill_dt would not fit in memory).
+        gaps = np.clip(np.ceil(h / fill_dt), 2, _MAX_PIECE_SAMPLES).astype(int)
         owner = np.repeat(np.arange(len(h)), gaps)
         step = np.arange(int(gaps.sum())) - np.repeat(np.cumsum(gaps) - gaps, gaps)
         pieces = b[:-1][owner] + h[owner] * step / gaps[owner]

@@ -16,6 +16,7 @@ import numpy as np
 
 from .api import JOINT_NAMES, forward_kinematics
 from .atomic import atomic_write
+from .errors import InputError
 from .kinematics import machine_jacobian
 from .machine import Machine
 from .numbers import csv_lines
@@ -23,6 +24,9 @@ from .schedule import Schedule
 from .timing import FeedPlan
 
 CHUNK = 50_000
+
+#: Most rows written (about 17 GB): beyond, the cycle time and period make no usable file.
+MAX_ROWS = 10**8
 HEADER = ",".join(["t", *JOINT_NAMES, *(f"v_{n}" for n in JOINT_NAMES), *(f"a_{n}" for n in JOINT_NAMES),
                    "feed", "motion", "line"])
 
@@ -64,7 +68,14 @@ def tip_speed(machine: Machine, q: np.ndarray, qd: np.ndarray, tool_length: np.n
 
 def write_timed_csv(path: str | Path, machine: Machine, schedule: Schedule, tool_length: np.ndarray,
                     lines: np.ndarray, period: float) -> None:
-    """Write the timed trajectory (see module docstring) atomically; tool_length and lines per block."""
+    """Write the timed trajectory (see module docstring) atomically; tool_length and lines per block.
+
+    Raises :class:`InputError` before writing when it would have more than :data:`MAX_ROWS` rows.
+    """
+    rows = schedule.total / period if period > 0 else 0.0  # with period 0: one row per block
+    if not rows <= MAX_ROWS:
+        raise InputError(f"the timed CSV would have {rows:.3g} rows (cycle time {schedule.total:.6g} s, period "
+                         f"{period:g} s), more than {MAX_ROWS:.0e}: give a longer --period", str(path))
     degrees = np.array([1.0, 1.0, 1.0, 180 / np.pi, 180 / np.pi])
     with atomic_write(path) as handle:
         handle.write(HEADER + "\n")
