@@ -611,7 +611,7 @@ def test_circle_axis_slerp(tmp_path: Path) -> None:
     [
         (MM + "GOTO/12,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,10,0\n", 4, "arc start point"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOTO/0,11,0\n", 5, "arc end point"),
-        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,0,10\nGOTO/0,10,0\n", 4, "circle axis has zero length"),
+        (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,0,10\nGOTO/0,10,0\n", 4, "circle axis has zero or absurd length"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0\nGOTO/0,10,0\n", 4, "CIRCLE needs 6 to 11 numbers"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\n", 4, "not followed by the GOTO"),
         (MM + "GOTO/10,0,0\nCIRCLE/0,0,0,0,0,1,10\nGOHOME\n", 5, "must be followed by a GOTO"),

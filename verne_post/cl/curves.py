@@ -65,10 +65,11 @@ def _arc_record(st: ReaderState, rec: Record, word: str) -> tuple[list[float], l
 
 def _axis(st: ReaderState, nums: list[float], word: str, line: int) -> np.ndarray:
     n = np.array(nums[3:6], dtype=float)
-    nn = float(np.linalg.norm(n))
-    if nn < 1e-9:
-        raise st.fail(f"{word} axis has zero length", line)
-    return n / nn
+    big = float(np.abs(n).max())
+    nn = float(np.linalg.norm(n / big)) * big if big > 0 else 0.0  # no overflow for components near 1e308
+    if not 1e-9 <= nn <= 1e9:
+        raise st.fail(f"{word} axis has zero or absurd length ({nn:.3g})", line)
+    return n / big / (nn / big)
 
 
 def _radius(st: ReaderState, value: float, word: str, line: int) -> float:

@@ -53,6 +53,7 @@ from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, valida
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
 
+MAX_CL_BYTES = 2 << 30  # 2 GiB of CL text: far beyond any program, short of exhausting memory
 _CTRL_RE = re.compile(r"[\x00-\x08\x0b\x0e-\x1f\x7f]")
 _UNITS_RE = re.compile(r"^[ \t]*UNITS?[ \t]*/[ \t]*([A-Za-z]+)", re.IGNORECASE | re.MULTILINE)
 _FEED_UNIT_RE = re.compile(
@@ -94,13 +95,16 @@ _REJECTED = {
 def _read_text(path: str | os.PathLike[str], src: str) -> str:
     """Read a text file; reject binary data (NUL bytes, undecodable or control characters)."""
     try:
-        data = Path(path).read_bytes()
+        with open(path, "rb") as handle:  # bounded: a device or pipe may never end
+            data = handle.read(MAX_CL_BYTES + 1)
     except FileNotFoundError:
         raise InputError("file not found", source=src) from None
     except IsADirectoryError:
         raise InputError("is a directory, not a file", source=src) from None
     except OSError as exc:
         raise InputError(f"cannot read file: {exc.strerror or exc}", source=src) from None
+    if len(data) > MAX_CL_BYTES:
+        raise InputError(f"larger than {MAX_CL_BYTES >> 20} MiB: split the program", source=src)
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # UTF-16 with BOM (Windows "Unicode" text)
         try:
             text = data.decode("utf-16")

@@ -110,9 +110,12 @@ def _tool_number(st: ReaderState, v: float, line: int) -> int:
     return int(v)
 
 
+MAX_TOOL_LENGTH = 2000.0  # mm, as for --tool-length and the machine's tool table
+
+
 def _length(st: ReaderState, v: float, what: str, line: int) -> float:
-    if not 0 < v <= MAX_COORD:
-        raise st.fail(f"{what}: tool length must be positive and at most {MAX_COORD:g}, got {v:g}", line)
+    if not 0 < v * st.scale <= MAX_TOOL_LENGTH:
+        raise st.fail(f"{what}: tool length must be positive and at most {MAX_TOOL_LENGTH:g} mm, got {v:g}", line)
     return v * st.scale
 
 
