@@ -36,7 +36,7 @@ def test_good_program_is_written(tmp_path: Path) -> None:
         ("GOTO/0,0,50,0,0,1\nGOTO/1,2x,3\n", 8, "2x"),
         ("GOTO/0,0,50,0,0,1\nGOTO/1,nan,3\n", 8, "NaN"),
         ("GOTO/0,0,50,0,0,0\n", 7, "zero length"),
-        ("FEDRAT/IPM,4.9e-324\nGOTO/0,0,50,0,0,1\nGOTO/1,0,50,0,0,1\n", 9, "below the slowest usable"),
+        ("FEDRAT/IPM,4.9e-324\nGOTO/0,0,50,0,0,1\nGOTO/1,0,50,0,0,1\n", 7, "mm/min is outside"),  # at the FEDRAT
     ],
 )
 def test_malformed_cl(tmp_path: Path, body: str, line: int, reason: str) -> None:

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import InputError
 from .machine import Machine
-from .toolpath import Event, ToolChange, Toolpath
+from .toolpath import MIN_FEED, Event, ToolChange, Toolpath
 
 
 @dataclass(frozen=True)
@@ -64,9 +64,6 @@ def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, s
                      f"machine's tool table, or with --tool-length", source, change.line)
 
 
-#: Slowest feed (mm/min, or 1/min in inverse time) planned: slower is a mistake, and would
-#: round to zero in the planner's mm/s.
-MIN_FEED = 1e-6
 
 
 def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[float, float, float] | None = None,

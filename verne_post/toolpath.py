@@ -11,6 +11,7 @@ from typing import Literal
 
 import numpy as np
 
+MIN_FEED = 1e-6  # mm/min (or 1/min inverse time): slower is a mistake, and rounds to 0 in the planner's mm/s
 MOTION_KINDS = ("feed", "rapid", "arc", "spline", "cycle")  # what a pose's motion came from in the CL file
 
 

@@ -14,12 +14,11 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from verne_post.toolpath import Comment, Coolant, Dwell, Spindle, Stop
+from verne_post.toolpath import MIN_FEED, Comment, Coolant, Dwell, Spindle, Stop
 
 from .lexer import Record
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState
 
-MIN_FEED = 1e-3  # mm/min (or 1/min inverse time): slower is a corrupt value, not a feed
 MAX_FEED = 1e7
 MAX_RPM = 1e6
 MAX_DWELL = 1e5  # s
