@@ -73,7 +73,7 @@ HANDLERS: dict[str, Handler] = {
 _IGNORED = frozenset({
     "PAINT", "DISPLY", "PEN", "AUTOPS", "CLRSRF", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
     "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "CLEARP", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
-    "HEAD", "AUXFUN", "OPSKIP", "PITCH", "THREAD", "ROTREF",
+    "HEAD", "AUXFUN", "OPSKIP",
 })  # fmt: skip
 _IGNORED_PREFIXES = ("CSI_SET_",)
 # Refused: records whose geometry cannot be honoured in one joint-space program.
