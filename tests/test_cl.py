@@ -688,7 +688,7 @@ def test_unknown_record_warning(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(
     ("record", "message"),
-    [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("CALSUB/1", "subroutines")],
+    [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("INDEX/1", "INDEX")],
 )
 def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
     e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")

@@ -414,3 +414,31 @@ def test_real_samples_post_and_certify(tmp_path: Path, name: str) -> None:
     header = out.read_text()[:2000]
     assert "(VERIFIED: MAX TIP DEVIATION" in header and "ALL LIMITS HELD" in header
     assert "(CL DIALECT " in header
+
+
+# --------------------------------------------------------------------------- Pro/ENGINEER subroutines
+
+
+def test_defsub_calsub_replays_the_subroutine(tmp_path: Path) -> None:
+    # APT subroutines as Pro/ENGINEER writes them: DEFSUB/n ... ENDSUB stores, CALSUB/n runs.
+    text = ("$$*          Pro/CLfile  Version 19.0\nPARTNO SUBS\nUNITS / MM\nLOADTL / 1\nFEDRAT / 100,  MMPM\n"
+            "DEFSUB / 1\nGODLTA / 0, 0, -5\nGODLTA / 0, 0, 5\nENDSUB\n"
+            "GOTO / 0, 0, 10\nCALSUB / 1\nGOTO / 10, 0, 10\nCALSUB / 1\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[0, 0, 10], [0, 0, 5], [0, 0, 10], [10, 0, 10], [10, 0, 5], [10, 0, 10]])
+    assert tp.line.tolist() == [10, 7, 8, 12, 7, 8]  # the subroutine's poses name its own lines
+
+
+@pytest.mark.parametrize(
+    ("body", "line", "message"),
+    [
+        ("CALSUB/2\n", 4, "no such subroutine"),
+        ("DEFSUB/1\nGOTO/1,0,0\n", 4, "has no ENDSUB"),
+        ("ENDSUB\n", 4, "ENDSUB without DEFSUB"),
+        ("DEFSUB/1\nDEFSUB/2\nENDSUB\nENDSUB\n", 5, "DEFSUB inside"),
+        ("DEFSUB/1\nCALSUB/1\nENDSUB\nCALSUB/1\n", 5, "nested more than"),
+    ],
+)
+def test_bad_subroutines(tmp_path: Path, body: str, line: int, message: str) -> None:
+    e = refused(tmp_path, APT_HEAD + "GOTO/0,0,0\n" + body)
+    assert e.line == line and message in e.reason

@@ -35,7 +35,8 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
@@ -82,8 +83,6 @@ _REJECTED = {
     "REFSYS": "REFSYS (reference system) is not supported; use MSYS",
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
-    "DEFSUB": "DEFSUB/CALSUB (subroutines) are not supported; output the motion explicitly",
-    "CALSUB": "DEFSUB/CALSUB (subroutines) are not supported; output the motion explicitly",
     "ROTABL": "ROTABL (table rotation in the CL data) is not supported: give 5-axis tool axes in GOTO records",
     "INDIRV": "INDIRV is not supported: the CL file must contain explicit GOTO points",
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
@@ -170,10 +169,38 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
         st.warn(rec.line, f"unknown record '{shown}' ignored", kind=f"unknown {shown}")
 
 
-def _parse(lines: list[str], st: ReaderState) -> None:
+MAX_CALL_DEPTH = 16  # subroutines calling subroutines
+
+
+@dataclass
+class _Subroutines:
+    """``DEFSUB/n`` ... ``ENDSUB`` store their records unexecuted; ``CALSUB/n`` runs them (Pro/ENGINEER)."""
+
+    defined: dict[str, list[Record]] = field(default_factory=dict)
+    capturing: tuple[str, int, list[Record]] | None = None  # name, DEFSUB line, records so far
+
+    def name(self, st: ReaderState, rec: Record) -> str:
+        words = [w.strip().upper() for w in rec.args.split(",")]
+        if len(words) != 1 or not words[0]:
+            raise st.fail(f"{rec.word} needs one subroutine name or number, got '{rec.args.strip()[:40]}'", rec.line)
+        return words[0].removesuffix(".0") if words[0].replace(".", "").isdigit() else words[0]
+
+
+def _run(st: ReaderState, recs: Iterable[Record], subs: _Subroutines, depth: int) -> None:
     rows, out_lines = st.rows, st.lines
     fast = st.fast_goto_ok()
-    for rec in records(lines):
+    for rec in recs:
+        if subs.capturing is not None:
+            if rec.word == "ENDSUB":
+                name, _line, body = subs.capturing
+                subs.defined[name] = body
+                subs.capturing = None
+            elif rec.word == "DEFSUB":
+                raise st.fail(f"DEFSUB inside the definition of subroutine {subs.capturing[0]} "
+                              f"(line {subs.capturing[1]})", rec.line)
+            else:
+                subs.capturing[2].append(rec)
+            continue
         if fast and rec.word == "GOTO" and "_" not in rec.args:  # float() would read 1_0 as 10
             try:
                 vals = [float(v) for v in rec.args.split(",")]
@@ -191,10 +218,29 @@ def _parse(lines: list[str], st: ReaderState) -> None:
                     rows.append(vals)
                     out_lines.append(rec.line)
                     continue
-        _dispatch(st, rec)
+        if rec.word == "DEFSUB":
+            subs.capturing = (subs.name(st, rec), rec.line, [])
+        elif rec.word == "ENDSUB":
+            raise st.fail("ENDSUB without DEFSUB", rec.line)
+        elif rec.word == "CALSUB":
+            name = subs.name(st, rec)
+            if name not in subs.defined:
+                raise st.fail(f"CALSUB/{name[:40]}: no such subroutine defined before it", rec.line)
+            if depth >= MAX_CALL_DEPTH:
+                raise st.fail(f"CALSUB/{name[:40]}: subroutines nested more than {MAX_CALL_DEPTH} deep", rec.line)
+            _run(st, subs.defined[name], subs, depth + 1)
+        else:
+            _dispatch(st, rec)
         if st.done:
             break
         fast = st.fast_goto_ok()
+
+
+def _parse(lines: list[str], st: ReaderState) -> None:
+    subs = _Subroutines()
+    _run(st, records(lines), subs, 0)
+    if subs.capturing is not None:
+        raise st.fail(f"DEFSUB/{subs.capturing[0][:40]} has no ENDSUB", subs.capturing[1])
     if isinstance(st.curve, curves.PendingSpline):
         curves.finish_spline(st)
     if isinstance(st.curve, curves.PendingArc):
