@@ -3,11 +3,15 @@ no traceback, and no output file (an existing one is left as it was)."""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from click.testing import CliRunner
+
+ROOT = Path(__file__).resolve().parent.parent
 
 HEADER = "PARTNO/TEST\nUNITS/MM\nMULTAX/ON\nTLDATA/MILL,10,0,80,0,0\nLOAD/TOOL,1\nFEDRAT/MMPM,1000\n"
 GOOD = "GOTO/0,0,50,0,0,1\nGOTO/10,0,50,0.1,0,0.995\nGOTO/20,5,50,0,0,1\nFINI\n"
@@ -149,3 +153,21 @@ def test_report_of_a_failed_run(tmp_path: Path) -> None:
     assert [f"verne-post: error: {source}:{v['line']}: {v['message']}" for v in report["violations"]] == printed
     assert not (tmp_path / "part.nc").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["part.cls", "r.json"]
+
+
+def test_a_path_that_never_converges_is_reported_not_split_for_ever(tmp_path: Path) -> None:
+    """Found by fuzzing: a machine file whose leg I is mirrored (D1 - d1 = +320 mm, L1 = 1294.43 mm) passes
+    validation, but its joint interpolation never comes within tolerance of the CL path, so every move
+    kept splitting at all 24 levels (2^24 blocks each). The splitting has a budget; the moves are violations."""
+    from verne_post.cli import main
+
+    machine = (ROOT / "machines" / "verne.yaml").read_text()
+    machine = re.sub(r"D1_minus_d1: *-?[\d.]+", "D1_minus_d1: 320", machine)
+    machine = re.sub(r"\n  L1: *[\d.]+", "\n  L1: 1294.43", machine)
+    (tmp_path / "m.yaml").write_text(machine)
+    out = tmp_path / "part.nc"
+    result = CliRunner().invoke(main, [str(ROOT / "tests" / "data" / "nx_multi_op_mm.cls"), "--machine",
+                                       str(tmp_path / "m.yaml"), "-o", str(out), "--work-offset", "8.258", "-91.482",
+                                       "45.063", "--no-timing", "--quiet"])
+    assert result.exit_code == 3, result.output
+    assert "cannot be kept within 0.005 mm" in result.stderr and not out.exists()

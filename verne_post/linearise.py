@@ -27,6 +27,10 @@ QUARTERS_FROM = 0.3
 #: Splitting aims at this share of the tolerance, so that denser checks also pass.
 MARGIN = 0.8
 MAX_LEVELS = 24
+#: Inserted poses at most, per CL pose (and at least in all): a move that keeps splitting at
+#: every level (a joint path crossing a fold of the kinematics) would otherwise double the work
+#: at each of the levels; past the budget the moves still splitting are reported unresolved.
+INSERT_BUDGET_PER_POSE, INSERT_BUDGET_MIN = 64, 100_000
 
 
 def slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -140,7 +144,8 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
             tip_error[near] = np.maximum(tip_error[near], more[0])
             axis_error[near] = np.maximum(axis_error[near], more[1])
         split = (tip_error > MARGIN * tol) | (axis_error > MARGIN * axis_tol)
-        if level == MAX_LEVELS:
+        if level == MAX_LEVELS or size - n + np.count_nonzero(split) > max(INSERT_BUDGET_PER_POSE * n,
+                                                                              INSERT_BUDGET_MIN):
             unresolved.append(k[split])
             break
         left, right, k, lengths = left[split], right[split], k[split], lengths[split]
