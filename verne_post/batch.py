@@ -29,17 +29,19 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 
 from . import __version__
 from .atomic import atomic_write, check_writable
 from .errors import InputError, OutputError, UserError, one_line
 from .gcode import PREAMBLE, with_header_line
 from .machine import DEFAULT_MACHINE, load_machine
-from .pipeline import PostOptions, postprocess, write_output
+
+if TYPE_CHECKING:
+    from .pipeline import PostOptions
 
 #: Status of a file in the summary and the exit code the single-file command gives for it.
 EXIT_CODES = {"ok": 0, "skipped": 0, "bad-input": 2, "violations": 3, "error": 1}
@@ -57,14 +59,20 @@ _HASH_LINE = re.compile(r"^(?:N\d+ )?\(BATCH HASH ([0-9a-f]{64})\)\s*$")
 
 @dataclass(frozen=True)
 class BatchOptions:
-    """The pipeline's choices and what is written: G-code (verified unless ``verify`` is False)
-    or the timed CSV at ``period`` s."""
+    """The pipeline's choices (None: the defaults) and what is written: G-code (verified unless
+    ``verify`` is False) or the timed CSV at ``period`` s."""
 
-    post: PostOptions = field(default_factory=PostOptions)
+    post: PostOptions = None  # type: ignore[assignment]  # made PostOptions() at once
     output_format: Literal["gcode", "csv"] = "gcode"
     period: float = 0.001
     verify: bool = True
     report: bool = False  # also return the JSON report of each file (PostResult.report)
+
+    def __post_init__(self) -> None:
+        if self.post is None:  # the pipeline (and its planner) is imported only where posting happens
+            from .pipeline import PostOptions
+
+            object.__setattr__(self, "post", PostOptions())
 
     @property
     def suffix(self) -> str:
@@ -173,6 +181,8 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
     the feed planning in this process, and the output read back with its batch hash. Bad input,
     violations and failures come back as a status and message, never raised.
     """
+    from .pipeline import postprocess, write_output
+
     start = time.perf_counter()
     figures: dict[str, Any] = {"line": None, "cl_points": None, "blocks": None, "cycle_time_s": None, "tools": (),
                                "seconds": 0.0}
@@ -202,7 +212,7 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
             post = replace(options.post, workers=1)  # the batch runs files side by side: one process each
             result = postprocess(source, loaded, post, progress=lambda stage: _report(stages, name, stage))
             figures.update(cl_points=len(result.poses), blocks=len(result.blocks.joints),
-                           cycle_time_s=float(result.duration.sum()), tools=tuple(t.number for t in result.poses.tools))
+                           tools=tuple(t.number for t in result.poses.tools))
             report = result.report(loaded, post) if options.report else None
             if result.violations:
                 first = result.violations[0]
@@ -219,6 +229,7 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
                 return outcome("violations", f"{where}: the program fails its verification at its line "
                                              f"{finding.line}: {finding.message}", report=report)
             output = target.read_bytes()
+            figures["cycle_time_s"] = float(result.duration.sum())  # as the G-code header says
             if options.output_format == "gcode":
                 digest = input_hash(name, data, machine or MachineFile.read(None), options)
                 output = with_header_line(output.decode("ascii"), f"BATCH HASH {digest}").encode("ascii")
@@ -454,7 +465,7 @@ def local_executor(jobs: int | None = None) -> ProcessPoolExecutor:
     methods = multiprocessing.get_all_start_methods()
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     if "forkserver" in methods:
-        context.set_forkserver_preload(["verne_post.batch"])
+        context.set_forkserver_preload(["verne_post.batch", "verne_post.pipeline"])
     return ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1, mp_context=context)
 
 
@@ -491,9 +502,9 @@ def open_executor(scheduler: str | None = None, jobs: int | None = None, stages:
             width = jobs or os.cpu_count() or 1
             channel = stack.enter_context(multiprocessing.Manager()).Queue() if stages else None
         else:
-            from distributed import Queue
-
             client = stack.enter_context(dask_client(scheduler, jobs))
+            from distributed import Queue  # present: dask_client says how to install it otherwise
+
             executor = stack.enter_context(client.get_executor(pure=False))
             width = max(1, sum(client.nthreads().values()))
             channel = Queue(client=client) if stages else None
