@@ -343,22 +343,17 @@ def _run(files: Sequence[Path], outputs: Sequence[Path], machine: MachineFile, o
          ) -> list[BatchResult]:
     """Submit the files, at most two per worker in flight (only those inputs are held in memory),
     and write each output as it comes back."""
-    results: list[BatchResult | None] = [None] * len(files)
+    results: dict[int, BatchResult] = {}
     running: dict[Future[Outcome], tuple[int, str]] = {}
+    order = iter(range(len(files)))
 
     def done(k: int, result: BatchResult) -> None:
         results[k] = result
         if on_done is not None:
             on_done(result)
 
-    pending = iter(range(len(files)))
-    exhausted = False
-    while running or not exhausted:
-        while not exhausted and len(running) < 2 * width:
-            k = next(pending, None)
-            if k is None:
-                exhausted = True
-                break
+    def submit_more() -> None:
+        for k in order:  # resumes where the last call stopped
             name = str(files[k])
             try:
                 data = files[k].read_bytes()
@@ -371,16 +366,25 @@ def _run(files: Sequence[Path], outputs: Sequence[Path], machine: MachineFile, o
                 done(k, BatchResult(name, "skipped", 0, output=str(outputs[k]), hash=digest))
                 continue
             running[executor.submit(post_file, name, data, machine, options, stages)] = (k, digest)
-        if not running:
-            continue
-        finished, _ = wait(running, timeout=0.2 if on_stage else None, return_when=FIRST_COMPLETED)
-        if on_stage is not None and stages is not None:
-            for file, stage in _drain(stages):
-                on_stage(file, stage)
-        for future in finished:
-            k, digest = running.pop(future)
-            done(k, _collect(str(files[k]), future, outputs[k], digest))
-    return [r for r in results if r is not None]
+            if len(running) >= 2 * width:
+                return
+
+    try:
+        submit_more()
+        while running:
+            finished, _ = wait(running, timeout=0.2 if on_stage else None, return_when=FIRST_COMPLETED)
+            if on_stage is not None and stages is not None:
+                for file, stage in _drain(stages):
+                    on_stage(file, stage)
+            for future in finished:
+                k, digest = running.pop(future)
+                done(k, _collect(str(files[k]), future, outputs[k], digest))
+            submit_more()
+    except BaseException:  # interrupted: what has not started never will
+        for future in running:
+            future.cancel()
+        raise
+    return [results[k] for k in range(len(files))]
 
 
 def _collect(name: str, future: Future[Outcome], output: Path, digest: str) -> BatchResult:
