@@ -117,8 +117,8 @@ class Outcome(NamedTuple):
 @dataclass(frozen=True)
 class BatchResult:
     """One row of the summary: ``message`` is the first error or violation, as
-    ``FILE:LINE: reason``, and ``line`` its line in the input; figures are None where the
-    file was not posted to the end (bad input, skipped)."""
+    ``FILE:LINE: reason``, and ``line`` its line in the input; figures are None where they are
+    not known (bad input, skipped; the cycle time of a program not written)."""
 
     file: str
     status: str
@@ -236,8 +236,9 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
             return outcome("ok", output=output, report=report)
         except UserError as error:
             figures["line"] = error.line
-            status = "violations" if error.exit_code == 3 else "bad-input"
-            return outcome(status, str(error))
+            if isinstance(error, OutputError):  # the worker's own folder: not the user's mistake
+                return outcome("error", str(error))
+            return outcome("violations" if error.exit_code == 3 else "bad-input", str(error))
         except Exception as error:  # a bug or an exhausted machine: this file fails, the batch goes on
             return outcome("error", f"{name}: internal error: {type(error).__name__}: {error}")
 
@@ -261,7 +262,7 @@ def expand_inputs(inputs: Iterable[str | os.PathLike[str]]) -> list[Path]:
             files = sorted(p for p in Path(given).iterdir() if p.suffix.lower() in CL_SUFFIXES and p.is_file())
             if not files:
                 raise InputError(f"no CL files ({' '.join(CL_SUFFIXES)}) in the folder", given)
-        elif glob.has_magic(given) and not os.path.exists(given):
+        elif any(c in given for c in "*?[") and not os.path.exists(given):
             files = sorted(Path(p) for p in glob.glob(given, recursive=True) if os.path.isfile(p))
             if not files:
                 raise InputError("the pattern matches no file", given)
