@@ -122,7 +122,7 @@ def test_figures_are_those_of_the_program(local_run: Any) -> None:
         text = Path(r.output).read_text()
         motion = re.findall(r"^G[01] X", text, re.MULTILINE)
         assert r.blocks == len(motion)
-        assert r.tools == tuple(int(t) for t in re.findall(r"^T(\d+) M6", text, re.MULTILINE)) or r.tools == (0,)
+        assert r.tools == tuple(int(t) for t in re.findall(r"^\(TOOL (\d+) LENGTH", text, re.MULTILINE))
         assert r.cycle_time_s >= sum(60.0 / float(f) for f in re.findall(r"^G1 .* F(\S+)$", text, re.MULTILINE))
         assert r.seconds > 0
     assert {Path(r.file).name: r.cl_points for r in results}["a_line.csv"] == 40
@@ -134,7 +134,7 @@ def test_summary_csv_and_json_columns(tmp_path: Path) -> None:
                         "--summary", str(tmp_path / "s.csv"))
     assert result.exit_code == 2  # a bad input among them
     lines = result.stderr.splitlines()
-    assert lines == [f"verne-post: error: {files[1]}:{BAD_LINE}: " + lines[0].split(f":{BAD_LINE}: ", 1)[1]]
+    assert len(lines) == 1 and lines[0].startswith(f"verne-post: error: {files[1]}:{BAD_LINE}: ")
     with open(tmp_path / "s.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
     assert tuple(rows[0]) == ("file", "status", "exit_code", "message", "line", "cl_points", "blocks", "cycle_time_s",
