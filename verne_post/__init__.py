@@ -5,7 +5,10 @@ Library entry points (mm, radians inside arrays; table frame for tool poses)::
     machine = verne_post.load_machine()            # the shipped VERNE, or a YAML path
     ik = verne_post.inverse_kinematics(machine, tip, axis)
     fk = verne_post.forward_kinematics(machine, ik.joints)
+    results = verne_post.batch(["parts/"], None, verne_post.BatchOptions(), output_dir="posted")
 """
+
+__version__ = "0.1.0"  # before the imports: modules below read it
 
 from .api import (
     FKResult,
@@ -18,13 +21,14 @@ from .api import (
     inverse_kinematics_pairs,
     within_limits,
 )
+from .batch import BatchOptions, BatchResult, batch
 from .kinematics import module_fk_all, module_fk_working, module_ik_all, module_ik_working
 from .machine import Geometry, Machine, load_machine
 from .workspace import workspace
 
 __all__ = [
-    "FKResult", "Geometry", "IKResult", "Machine", "Status", "forward_kinematics", "forward_kinematics_all",
-    "inverse_kinematics", "inverse_kinematics_all", "inverse_kinematics_pairs", "load_machine", "module_fk_all",
-    "module_fk_working", "module_ik_all", "module_ik_working", "within_limits", "workspace",
+    "BatchOptions", "BatchResult", "FKResult", "Geometry", "IKResult", "Machine", "Status", "batch",
+    "forward_kinematics", "forward_kinematics_all", "inverse_kinematics", "inverse_kinematics_all",
+    "inverse_kinematics_pairs", "load_machine", "module_fk_all", "module_fk_working", "module_ik_all",
+    "module_ik_working", "within_limits", "workspace",
 ]
-__version__ = "0.1.0"

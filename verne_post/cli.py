@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import warnings
+from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -177,6 +178,7 @@ def main() -> None:
     verne-post part.cls -o part.nc        postprocess (same as 'verne-post post ...')
     verne-post check part.cls             everything but writing the program
     verne-post verify part.nc [--against part.cls]   check a G-code program
+    verne-post batch DIR -o OUTDIR        many files at once (local processes or Dask)
     verne-post place part.cls             where to clamp the part (work offset and room)
     verne-post workspace -o ws.png        map of the tool-tip workspace for a tool axis
     verne-post toolpath part.cls          the toolpath as the reader understood it (CSV)
@@ -382,48 +384,77 @@ def _reader_option_group(function: Callable[..., Any]) -> Callable[..., Any]:
     return function
 
 
-def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
-    options = [
-        click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False)),
-        machine_option,
-        click.option("--tool-length", type=TOOL_LENGTH, default=None,
-                     help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
-        click.option("--work-offset", nargs=3, type=Number(-1e4, 1e4, " mm"), default=None,
-                     help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
-                          "offset with the most room to every limit (see 'verne-post place')."),
-        click.option("--auto-offset", is_flag=True, hidden=True),
-        click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
-        click.option("--tol", type=Number(1e-6, 10.0, " mm"), default=0.005, show_default=True,
-                     help="Tool tip deviation allowed between blocks, mm."),
-        click.option("--axis-tol", type=Number(1e-6, 10.0, " deg"), default=0.05, show_default=True,
-                     help="Tool axis deviation allowed between blocks, degrees."),
-        click.option("--arc-tol", type=Number(1e-6, 10.0, " mm"), default=0.001, show_default=True,
-                     help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
-        *_reader_options,
-        click.option("--report", "report_path", type=click.Path(dir_okay=False),
-                     help="Write violations and statistics: JSON, or a self-contained HTML page when it ends "
-                          "in .html."),
-        click.option("--no-timing", is_flag=True,
-                     help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
-        click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
-        click.option("--max-messages", type=Number(0, 10**6, integer=True), default=20, show_default=True,
-                     help="Violations printed before the count."),
-    ]
+def _decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) -> Callable[..., Any]:
     for option in reversed(options):
         function = option(function)
     return function
 
 
-def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool,
-                  **choices: Any) -> tuple[Machine, Any, Any]:
-    """Load the machine and run every stage but writing; a progress bar on a terminal."""
-    from .pipeline import PostOptions, postprocess
+# The choices of the pipeline ('post', 'check' and 'batch'), around the --report option.
+_choices_before_report = [
+    machine_option,
+    click.option("--tool-length", type=TOOL_LENGTH, default=None,
+                 help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
+    click.option("--work-offset", nargs=3, type=Number(-1e4, 1e4, " mm"), default=None,
+                 help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
+                      "offset with the most room to every limit (see 'verne-post place')."),
+    click.option("--auto-offset", is_flag=True, hidden=True),
+    click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
+    click.option("--tol", type=Number(1e-6, 10.0, " mm"), default=0.005, show_default=True,
+                 help="Tool tip deviation allowed between blocks, mm."),
+    click.option("--axis-tol", type=Number(1e-6, 10.0, " deg"), default=0.05, show_default=True,
+                 help="Tool axis deviation allowed between blocks, degrees."),
+    click.option("--arc-tol", type=Number(1e-6, 10.0, " mm"), default=0.001, show_default=True,
+                 help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
+    *_reader_options,
+]
+_choices_after_report = [
+    click.option("--no-timing", is_flag=True,
+                 help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
+    click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
+    click.option("--max-messages", type=Number(0, 10**6, integer=True), default=20, show_default=True,
+                 help="Violations printed before the count."),
+]
+
+# What is written and how ('post' and 'batch').
+_output_options = [
+    click.option("--format", "output_format", type=click.Choice(["gcode", "csv"]), default=None,
+                 help="Output format (default: from the output file's suffix; G-code for 'batch')."),
+    click.option("--period", type=Number(MIN_PERIOD, 60.0, " s", zero=True), default=0.001, show_default=True,
+                 help="Timed CSV sample period in s; 0 gives one row per block end."),
+    click.option("--no-verify", is_flag=True,
+                 help="Skip reading the G-code back and verifying it with the forward kinematics before writing."),
+]
+
+
+def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
+    return _decorated(function, [
+        click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False)),
+        *_choices_before_report,
+        click.option("--report", "report_path", type=click.Path(dir_okay=False),
+                     help="Write violations and statistics: JSON, or a self-contained HTML page when it ends "
+                          "in .html."),
+        *_choices_after_report,
+    ])
+
+
+def _options_from(no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
+    """The :class:`PostOptions` of the command-line choices (machine, --quiet and the like removed)."""
+    from .pipeline import PostOptions
 
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
-    machine = load_machine(machine_path)
     offset = "auto" if auto_offset else choices["work_offset"] or None
-    options = PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing)
+    return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing)
+
+
+def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool,
+                  **choices: Any) -> tuple[Machine, Any, Any]:
+    """Load the machine and run every stage but writing; a progress bar on a terminal."""
+    from .pipeline import postprocess
+
+    options = _options_from(no_timing, auto_offset, **choices)
+    machine = load_machine(machine_path)
     stages = (4 if no_timing else 5) + (PLACEMENT_STEPS if auto_offset else 0)
     with _progress(stages, quiet) as tick:
         result = postprocess(cl_file, machine, options, progress=lambda stage: tick())
@@ -478,12 +509,7 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
 @main.command("post")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Output file: G-code (default PART.nc), or a timed CSV when it ends in .csv.")
-@click.option("--format", "output_format", type=click.Choice(["gcode", "csv"]), default=None,
-              help="Output format (default: from the output file's suffix).")
-@click.option("--period", type=Number(MIN_PERIOD, 60.0, " s", zero=True), default=0.001, show_default=True,
-              help="Timed CSV sample period in s; 0 gives one row per block end.")
-@click.option("--no-verify", is_flag=True,
-              help="Skip reading the G-code back and verifying it with the forward kinematics before writing.")
+@functools.partial(_decorated, options=_output_options)
 @_post_options
 @user_errors
 def post_command(cl_file: str, output: str | None, output_format: str | None, period: float, no_verify: bool,
@@ -493,8 +519,7 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
     The G-code is verified before it is written (see 'verne-post verify'): a program that fails
     is not written (exit 3); one that passes carries the certified figures in its header.
     """
-    from .pipeline import write_gcode
-    from .trajectory import write_timed_csv
+    from .pipeline import write_output
 
     target = output or str(Path(cl_file).with_suffix(".nc"))
     as_csv = (output_format or ("csv" if target.lower().endswith(".csv") else "gcode")) == "csv"
@@ -503,16 +528,12 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
     _check_outputs(cl_file, target, report_path)
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
-    if as_csv:
-        blocks = result.blocks
-        write_timed_csv(target, machine, result.schedule, result.poses.tool_length[blocks.pose],
-                        result.poses.line[blocks.pose], period)
-    else:
-        verification = write_gcode(result, machine, options, target, verify=not no_verify)
-        if verification is not None and not verification.ok:
-            _print_findings(verification, max_messages)
-            click.echo(f"verne-post: {target}: the program fails its verification: nothing written", err=True)
-            sys.exit(3)
+    verification = write_output(result, machine, options, target, "csv" if as_csv else "gcode", period,
+                                verify=not no_verify)
+    if verification is not None and not verification.ok:
+        _print_findings(verification, max_messages)
+        click.echo(f"verne-post: {target}: the program fails its verification: nothing written", err=True)
+        sys.exit(3)
 
 
 @main.command("check")
@@ -527,6 +548,65 @@ def check_command(cl_file: str, report_path: str | None, max_messages: int, **ch
         click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "
                    f"{int(np.sum(result.blocks.fraction < 1))} inserted, cycle time "
                    f"{np.sum(result.duration):.1f} s)", err=True)
+
+
+@main.command("batch")
+@click.argument("inputs", metavar="INPUTS...", nargs=-1, required=True)
+@click.option("-o", "--output-dir", required=True, type=click.Path(file_okay=False),
+              help="Folder of the outputs (made if missing): one per input, same stem, .nc or .csv.")
+@click.option("--jobs", type=Number(1, 4096, integer=True), default=None,
+              help="Worker processes (default: the CPU count); with --scheduler dask, the local cluster's.")
+@click.option("--scheduler", default=None,
+              help="Run on a Dask cluster: tcp://HOST:PORT, or 'dask' for a local one "
+                   "(pip install 'verne-post[dask]').")
+@click.option("--summary", "summary_path", type=click.Path(dir_okay=False),
+              help="One row per file: CSV, or JSON when it ends in .json.")
+@click.option("--report-each", is_flag=True, help="A JSON report next to each output (STEM.json).")
+@click.option("--skip-unchanged", is_flag=True,
+              help="Leave out files whose output records the hash of this input, machine file, options and "
+                   "verne-post version.")
+@functools.partial(_decorated, options=[*_output_options, *_choices_before_report, *_choices_after_report])
+@user_errors
+def batch_command(inputs: tuple[str, ...], output_dir: str, jobs: int | None, scheduler: str | None,
+                  summary_path: str | None, report_each: bool, skip_unchanged: bool, output_format: str | None,
+                  period: float, no_verify: bool, machine_path: str | None, quiet: bool, max_messages: int,
+                  no_timing: bool, auto_offset: bool, **choices: Any) -> None:
+    """Postprocess many CL files (files, folders, glob patterns) into OUTDIR, on local processes
+    or a Dask cluster.
+
+    Each file is posted on its own: a bad file is recorded and the others go on. Exit code 0
+    when every file was posted, 2 when any was bad input, else 3 when any could not be posted
+    (violations, or a failure); --summary says which and why.
+    """
+    from .batch import BatchOptions, batch, exit_code, expand_inputs, open_executor, write_summary
+
+    options = BatchOptions(_options_from(no_timing, auto_offset, **choices), output_format or "gcode", period,
+                           not no_verify)
+    files = expand_inputs(inputs)
+    if summary_path:
+        check_writable(summary_path)  # now, not after the batch
+    show = not quiet and sys.stderr.isatty()
+    stream = sys.stderr if show else io.StringIO()
+    with open_executor(scheduler, jobs, stages=show) as (executor, width, stages), click.progressbar(
+            length=len(files), label="verne-post batch", file=stream, item_show_func=lambda note: note) as bar:
+        def on_stage(file: str, stage: str) -> None:
+            bar.current_item = f"{Path(file).name}: {stage}"
+            bar.render_progress()
+
+        results = batch(files, machine_path, options, executor, output_dir=output_dir, skip_unchanged=skip_unchanged,
+                        report_each=report_each, jobs=width, stages=stages, on_stage=on_stage if show else None,
+                        on_done=lambda r: bar.update(1, f"{Path(r.file).name}: {r.status}"))
+    if summary_path:
+        write_summary(summary_path, results)
+    failed = [r for r in results if r.exit_code]
+    for r in failed[:max_messages]:
+        click.echo(f"verne-post: error: {r.message}", err=True)
+    if len(failed) > max_messages:
+        click.echo(f"verne-post: ... and {len(failed) - max_messages} more failed files", err=True)
+    if not quiet:
+        counts = ", ".join(f"{n} {status}" for status, n in Counter(r.status for r in results).items())
+        click.echo(f"verne-post: {len(results)} files: {counts}", err=True)
+    sys.exit(exit_code(results))
 
 
 @main.command("toolpath")

@@ -317,10 +317,25 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
     return verification
 
 
+def write_output(result: PostResult, machine: Machine, options: PostOptions, path: str | os.PathLike[str],
+                 output_format: Literal["gcode", "csv"] = "gcode", period: float = 0.001, verify: bool = True
+                 ) -> Verification | None:
+    """Write the program of ``result`` to ``path`` (atomically): G-code as :func:`write_gcode` does,
+    or the timed joint trajectory as CSV, a row every ``period`` s (0: one per block end)."""
+    if output_format == "gcode":
+        return write_gcode(result, machine, options, path, verify=verify)
+    from .trajectory import write_timed_csv
+
+    blocks = result.blocks
+    write_timed_csv(path, machine, result.schedule, result.poses.tool_length[blocks.pose],
+                    result.poses.line[blocks.pose], period)
+    return None
+
+
 def gcode_format(machine: Machine) -> GcodeFormat:
     g = machine.gcode
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
 __all__ = ["Checked", "PostOptions", "PostResult", "block_durations", "check_poses", "feed_speed", "gcode_format",
-           "postprocess", "write_gcode"]
+           "postprocess", "write_gcode", "write_output"]
