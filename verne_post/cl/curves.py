@@ -66,10 +66,11 @@ def _arc_record(st: ReaderState, rec: Record, word: str) -> tuple[list[float], l
 def _axis(st: ReaderState, nums: list[float], word: str, line: int) -> np.ndarray:
     n = np.array(nums[3:6], dtype=float)
     big = float(np.abs(n).max())
-    nn = float(np.linalg.norm(n / big)) * big if big > 0 else 0.0  # no overflow for components near 1e308
+    scaled = n / big if big > 0 else n  # no overflow in the norm for components near 1e308
+    nn = float(np.linalg.norm(scaled)) * big
     if not 1e-9 <= nn <= 1e9:
         raise st.fail(f"{word} axis has zero or absurd length ({nn:.3g})", line)
-    return n / big / (nn / big)
+    return scaled / np.linalg.norm(scaled)
 
 
 def _radius(st: ReaderState, value: float, word: str, line: int) -> float:

@@ -120,7 +120,7 @@ class ReaderState:
         self.spindle_on = False
         self.tool = 0
         self.multax: bool | None = None
-        self.cycle: Any = None  # the active drilling cycle (cycles.CycleSpec) or None
+        self.cycle: Any = None  # the active drilling cycle, (cycles.CycleSpec, feed mm/min), or None
         self.last_cycle: Any = None
         self.curve: Any = None  # a CIRCLE/MOVARC waiting for its end GOTO, or a NURBS being read
         self.skip_goto: np.ndarray | None = None  # a GOTO repeating this point (a spline's end) adds nothing
