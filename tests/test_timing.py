@@ -9,21 +9,16 @@ from __future__ import annotations
 
 import math
 
+import copp_py as copp
 import numpy as np
 import pytest
 import toppra.algorithm
+from scipy.interpolate import CubicSpline
 
 import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
-from verne_post.timing import (
-    FeedPlan,
-    Limits,
-    PlanningError,
-    baseline_time,
-    lower_bound_time,
-    plan_feed,
-    plan_rapid,
-)
+from verne_post.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
+from verne_post.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
 
 DT = 1e-3
 SLACK = 1.02  # finite differences at 1 ms against the limits
@@ -229,18 +224,28 @@ def test_repeated_waypoint_is_refused(limits: Limits, helix_path: tuple[np.ndarr
     assert info.value.index == 4
 
 
-def test_toppra_failure_raises_with_the_waypoint(monkeypatch: pytest.MonkeyPatch, limits: Limits,
-                                                 helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+@pytest.mark.parametrize("engine", ["copp", "toppra"])
+def test_engine_failure_raises_with_the_waypoint(monkeypatch: pytest.MonkeyPatch, limits: Limits,
+                                                 helix_path: tuple[np.ndarray, np.ndarray], engine: str) -> None:
+    """Each engine's own way of failing half way along the path comes back naming that waypoint."""
     joints, tip = helix_path
 
-    def fail(self: toppra.algorithm.TOPPRA, *args: object, **kwargs: object) -> tuple:
+    def toppra_fails(self: toppra.algorithm.TOPPRA, *args: object, **kwargs: object) -> tuple:
         controllable = np.ones((len(self.gridpoints), 2))
         controllable[: len(controllable) // 2] = np.nan  # backward pass broke down half way
         return None, None, None, controllable
 
-    monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_parameterization", fail)
-    with pytest.raises(PlanningError, match=r"toppra found no feasible time law near waypoint \d+") as info:
-        plan_feed(joints[:201], tip[:201], np.full(200, 50.0), limits, angular_feed=1.0)
+    def copp_fails(problem: copp.solver.topp2_ra.Problem, options: object = None) -> np.ndarray:
+        middle = problem.s_len // 2
+        raise copp.CoppError(f"reach_set2 reported an infeasibility: The reachable set is empty at index {middle} "
+                             f"during the backward pass where a_max = NaN, a_min = NaN")
+
+    if engine == "toppra":
+        monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_parameterization", toppra_fails)
+    else:
+        monkeypatch.setattr(copp.solver.topp2_ra, "solve", copp_fails)
+    with pytest.raises(PlanningError, match=rf"{engine} found no feasible time law near waypoint \d+") as info:
+        plan_feed(joints[:201], tip[:201], np.full(200, 50.0), limits, angular_feed=1.0, engine=engine)
     assert 80 <= info.value.index <= 120
 
 
@@ -273,6 +278,70 @@ def test_bad_input_is_a_value_error(limits: Limits, helix_path: tuple[np.ndarray
 # ---------------------------------------------------------------------------------------------
 # Lower bound and baseline
 # ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("engine", ["copp", "toppra"])
+def test_both_engines_plan_the_zigzag_alike(machine: vp.Machine, limits: Limits,
+                                            zigzag_path: tuple[np.ndarray, np.ndarray], engine: str) -> None:
+    """copp-py and toppra solve the same TOPP2 problems: each plan holds every limit, same duration."""
+    joints, tip = zigzag_path
+    feed = np.full(len(joints) - 1, 100.0)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0, engine=engine)
+    check_feed_plan(machine, plan, joints, tip, feed, limits)
+    other = plan_feed(joints, tip, feed, limits, angular_feed=1.0, engine="toppra" if engine == "copp" else "copp")
+    assert plan.total == pytest.approx(other.total, rel=2e-3)
+
+
+def test_sequences_planned_together_are_planned_as_alone(machine: vp.Machine, limits: Limits,
+                                                         helix_path: tuple[np.ndarray, np.ndarray],
+                                                         zigzag_path: tuple[np.ndarray, np.ndarray]) -> None:
+    """One batch of different sequences (one refused) gives each the plan it gets on its own."""
+    (hj, ht), (zj, zt) = helix_path, zigzag_path
+    repeated = np.insert(hj[:10], 4, hj[4], axis=0), np.insert(ht[:10], 4, ht[4], axis=0)
+    sequences = [(hj[:300], ht[:300], np.full(299, 40.0)), (zj, zt, np.full(len(zj) - 1, 100.0)),
+                 (repeated[0], repeated[1], np.full(10, 50.0)), (hj[500:503], ht[500:503], np.full(2, 30.0)),
+                 (hj[600:602], ht[600:602], np.full(1, 30.0))]
+    together = plan_feeds(sequences, limits, angular_feed=1.0)
+    assert isinstance(together[2], PlanningError) and together[2].index == 4
+    for (joints, tip, feed), plan in zip(sequences, together, strict=True):
+        if isinstance(plan, PlanningError):
+            continue
+        alone = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+        assert plan.total == pytest.approx(alone.total, rel=1e-9)
+        np.testing.assert_allclose(plan.durations, alone.durations, rtol=1e-9)
+        check_feed_plan(machine, plan, joints, tip, feed, limits)
+
+
+def test_batched_splines_are_scipys_not_a_knot_splines() -> None:
+    """The one tridiagonal solve for many sequences gives each scipy's CubicSpline (2 to 12 points)."""
+    rng = np.random.default_rng(7)
+    sizes = rng.integers(2, 13, size=300)
+    x = np.concatenate([np.sort(rng.uniform(0, 1, n)) + np.arange(n) * 1e-3 for n in sizes])
+    y = rng.normal(size=(len(x), 4))
+    first = np.r_[0, np.cumsum(sizes)]
+    coef = _not_a_knot(x, y, first)
+    for r, n in enumerate(sizes):
+        a = first[r]
+        reference = CubicSpline(x[a:a + n], y[a:a + n], axis=0, bc_type="not-a-knot")
+        np.testing.assert_allclose(coef[:, a - r:a - r + n - 1], reference.c, rtol=1e-7, atol=1e-7)
+
+
+@pytest.mark.parametrize("speed", [50.0, 300.0, 800.0])
+def test_straight_move_is_near_the_time_optimal_jerk_limited_one(limits: Limits, speed: float) -> None:
+    """One slider along a straight line at a feed it can reach: the exact time-optimal
+    jerk-limited rest-to-rest move (analytic S-curve) bounds the plan from below, and the
+    per-sequence filter width keeps it close (the filter is exact where full acceleration is
+    not needed; where it is, at most the 3 % acceleration margin and a 25 % wider window)."""
+    length = 400.0
+    rho = 600.0 + np.linspace(0.0, length, 201)
+    joints = np.column_stack([rho, np.full_like(rho, 600.0), np.full_like(rho, 600.0), np.full_like(rho, 0.2),
+                              np.full_like(rho, 0.5)])
+    tip = np.column_stack([rho, np.zeros_like(rho), np.zeros_like(rho)])
+    a, j = limits.acceleration[0], limits.jerk[0]
+    ramp = 2.0 * math.sqrt(speed / j) if speed <= a * a / j else speed / a + a / j  # 0 -> speed
+    optimal = length / speed + ramp
+    plan = plan_feed(joints, tip, np.full(200, speed), limits, angular_feed=1.0)
+    assert optimal * (1 - 1e-6) <= plan.total <= optimal * (1.005 if speed <= a * a / j else 1.03)
 
 
 def test_baseline_of_a_straight_line_is_a_trapezoid(limits: Limits) -> None:

@@ -411,6 +411,9 @@ _choices_before_report = [
 _choices_after_report = [
     click.option("--no-timing", is_flag=True,
                  help="Skip time-parametrisation: feeds from the programmed feed and joint velocities only."),
+    click.option("--planner", type=click.Choice(["copp", "toppra"]), default="copp", show_default=True,
+                 help="TOPP engine of the feed moves: copp-py (fast) or toppra (the reference; same plans to "
+                      "solver tolerance)."),
     click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
     click.option("--max-messages", type=Number(0, 10**6, integer=True), default=20, show_default=True,
                  help="Violations printed before the count."),

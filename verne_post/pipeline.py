@@ -27,6 +27,7 @@ from .poses import MachinePoses, machine_poses
 from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import Dwell, ToolChange
+from .topp import Engine
 from .verify import Reference, Verification, verify_program
 
 if TYPE_CHECKING:
@@ -46,7 +47,8 @@ class PostOptions:
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
     arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
-    plan: bool = True  # time-parametrise (toppra, ruckig); False: feeds from the programmed feed only
+    plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
+    planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
 
@@ -245,7 +247,8 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
             schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
                                     poses.sequence[blocks.pose], Limits.from_machine(machine),
                                     rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
-                                    corner=np.radians(machine.timing.corner_angle), workers=options.workers)
+                                    corner=np.radians(machine.timing.corner_angle), workers=options.workers,
+                                    engine=options.planner)
             duration = schedule.duration
         except SequenceError as error:
             violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",

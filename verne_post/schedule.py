@@ -3,19 +3,23 @@
 A feed sequence is a run of feed blocks between rapids, tool changes, feed-mode changes and
 corners sharper than ``timing.corner_angle`` (in joint space weighted by the velocity limits);
 each is planned from rest to rest with the programmed feed as the tool-tip speed limit, the
-joint velocity, acceleration and jerk limits (``verne_post.timing.plan_feed``). Each rapid is a
-jerk-limited, phase-synchronised ruckig move from rest to rest. Units: s, mm, rad.
+joint velocity, acceleration and jerk limits (``verne_post.feed_planner.plan_feeds``, all the
+sequences at once). Each rapid is a jerk-limited, phase-synchronised ruckig move from rest to
+rest. Units: s, mm, rad.
 """
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from .timing import FeedPlan, Limits, PlanningError, RapidPlan, lower_bound_time, plan_feed, plan_rapid
+from .feed_planner import FeedPlan, plan_feeds
+from .timing import Limits, PlanningError, RapidPlan, lower_bound_time, plan_rapid
+from .topp import Engine
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,16 @@ class SequenceError(Exception):
         self.block = block
 
 
+#: Fewest feed sequences worth a process of their own (forking and sending plans back cost ~0.1 s).
+_PER_PROCESS = 400
+
+
+def _split(items: list, parts: int) -> list[list]:
+    """``items`` in ``parts`` contiguous runs of nearly equal length."""
+    bounds = np.linspace(0, len(items), parts + 1).round().astype(int)
+    return [items[a:b] for a, b in itertools.pairwise(bounds)]
+
+
 def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, limits: Limits, corner: float
                    ) -> list[tuple[int, int]]:
     """(first, last) block ranges of feed sequences; ``group`` ids (tool, feed mode) split them too."""
@@ -67,37 +81,38 @@ def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, lim
     return [(int(rows[a]), int(rows[b])) for a, b in zip(first, last, strict=True)]
 
 
-def _plan_sequence(task: tuple[np.ndarray, np.ndarray, np.ndarray, Limits, float, float, bool]
-                   ) -> FeedPlan | tuple[str, int | None]:
-    """plan_feed for one sequence; a PlanningError comes back as (reason, waypoint) to cross processes."""
-    joints, tip, feed, limits, rotary_feed, corner, jerk = task
-    try:
-        return plan_feed(joints, tip, feed, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9, jerk=jerk)
-    except PlanningError as error:
-        return error.reason, error.index
+def _plan_sequences(task: tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], Limits, float, float, bool, Engine]
+                    ) -> list[FeedPlan | tuple[str, int | None]]:
+    """plan_feeds for some sequences; a PlanningError comes back as (reason, waypoint) to cross processes."""
+    sequences, limits, rotary_feed, corner, jerk, engine = task
+    plans = plan_feeds(sequences, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9, jerk=jerk, engine=engine)
+    return [(p.reason, p.index) if isinstance(p, PlanningError) else p for p in plans]
 
 
 def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: np.ndarray, group: np.ndarray,
-                 limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1, jerk: bool = True
-                 ) -> Schedule:
+                 limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1, jerk: bool = True,
+                 engine: Engine = "copp") -> Schedule:
     """Durations of M blocks: joints (M, 5) mm/rad, tip (M, 3) mm relative to the part, feed
     (M,) mm/s (maximum tip speed of the motion into each block), rotary_feed rad/s, corner rad.
 
     Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
     processes (same results). ``jerk=False`` leaves out the jerk limits of feed moves (for
-    comparisons; rapids are always jerk-limited). Raises :class:`SequenceError` naming the block where a sequence
+    comparisons; rapids are always jerk-limited). ``engine`` is the TOPP2 engine (see
+    :mod:`verne_post.topp`). Raises :class:`SequenceError` naming the block where a sequence
     cannot be planned.
     """
     duration = np.zeros(len(joints))
     ranges = feed_sequences(joints, rapid, group, limits, corner)
-    tasks = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1], limits, rotary_feed, corner, jerk)
-             for a, b in ranges]
-    if workers > 1 and len(tasks) > 8:
+    sequences = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in ranges]
+    parts = max(1, min(workers, len(sequences) // _PER_PROCESS))
+    tasks = [(list(chunk), limits, rotary_feed, corner, jerk, engine)
+             for chunk in _split(sequences, parts)]
+    if parts > 1:
         context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-            plans = list(pool.map(_plan_sequence, tasks, chunksize=max(1, len(tasks) // (4 * workers))))
+        with ProcessPoolExecutor(max_workers=parts, mp_context=context) as pool:
+            plans = [plan for chunk in pool.map(_plan_sequences, tasks) for plan in chunk]
     else:
-        plans = [_plan_sequence(task) for task in tasks]
+        plans = [plan for task in tasks for plan in _plan_sequences(task)]
     planned: list[tuple[int, int, bool, FeedPlan | RapidPlan]] = []
     for (first, last), plan in zip(ranges, plans, strict=True):
         if not isinstance(plan, FeedPlan):

@@ -17,11 +17,11 @@ import numpy as np
 from .api import JOINT_NAMES, forward_kinematics
 from .atomic import atomic_write
 from .errors import InputError
+from .feed_planner import FeedPlan
 from .kinematics import machine_jacobian
 from .machine import Machine
 from .numbers import csv_lines
 from .schedule import Schedule
-from .timing import FeedPlan
 
 CHUNK = 50_000
 

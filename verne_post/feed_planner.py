@@ -1,0 +1,933 @@
+"""Time laws of feed sequences, planned for all the sequences of a program at once.
+
+Units: joints (N, 5) are rho1..3 in mm and theta1, theta2 in rad; tool tips in mm relative to
+the part; times in s; limits per second (mm/s, rad/s, mm/s^2, ...). Nothing here reads files.
+
+The controller moves linearly in joint space between the waypoints of a feed sequence; the
+polyline is smooth (small turning angles), so the planner sees a C2 cubic spline through the
+waypoints (not-a-knot, as scipy's ``CubicSpline``), parametrised by the normalised cumulative
+joint-space arc length s in [0, 1] (each joint weighted by 1 / its velocity limit, so mm and
+rad mix sensibly). The spline passes through every waypoint at its s value; between them it
+stays within the chordal tolerance of the polyline. Each sequence runs from rest to rest and is
+planned in four steps:
+
+1. Velocity caps on the path speed sdot(s) (1/s): per block the programmed feed as a limit on
+   the tool-tip speed, ``|d tip/ds| * sdot <= F``, with ``|d tip/ds|`` both the block's tip
+   chord over its s length and, pointwise, the derivative of a spline through the tips with
+   the same parameter (rotary-only blocks: ``|d(theta1, theta2)/ds| * sdot <= angular_feed``);
+   a minimum block duration; pointwise the joint velocity limits ``|q_j'(s)| sdot <= v_j`` and
+   a centripetal-jerk cap ``|q_j'''(s)| sdot^3 <= 0.7 J_j``, evaluated at every waypoint, block
+   middle and gridpoint, so the feed holds on every block even where the grid is coarser.
+2. TOPP2 (:mod:`verne_post.topp`: copp-py by default, toppra as the reference) with those caps
+   and the joint accelerations ``|q_j' sddot + q_j'' sdot^2| <= 0.97 a_j``, time-scaled so the
+   squared path speeds are O(1). A grid interval every ``w / 4`` of travel at the capped speed
+   (long blocks subdivided, runs of short blocks merged), at least 32, at most about one per
+   block: the cost follows the path's duration, not its waypoint count.
+3. Jerk: the constant-acceleration profile sigma(t) is filtered by a moving average of width w
+   (an FIR filter along the path, as CNC controllers limit jerk, so the motion stays on the
+   path): ``s(t) = 1/w * integral_{t-w}^{t} sigma``, a piecewise cubic whose path jerk is
+   ``(sigma''(t) - sigma''(t - w)) / w``. A rest-to-rest ramp to a joint speed V by such a
+   filter takes ``V / u + w``, with the path acceleration u bounded so that ``u / w`` meets the
+   jerk limit J: the least is ``2 sqrt(V / J)`` at ``w = sqrt(V / J)``, ``u = J w``, which is
+   exactly the time-optimal jerk-limited ramp. So each sequence gets its own width: the
+   largest ``sqrt(|qdot_j| / J_j)`` over its capped joint speeds, at most
+   ``1.25 max_j(a_j / J_j)`` (where full acceleration pays), and toppra's path acceleration
+   bound is ``min(a_j, w J_j) / max |q_j'|`` over the window. The filtered speed mixes the speeds
+   within half a window of travel, so each cap is imposed over ``w / 2 * (its own speed)`` of
+   travel on either side (a step down of the feed is reached that much early).
+4. Verification of the exact trajectory (joint velocity, acceleration, jerk, tip feed, angular
+   feed, analytic derivatives) at several samples of every polynomial piece of the time law and
+   both sides of every waypoint. Where a limit is exceeded, the speed caps (excess due to speed
+   and curvature) or the acceleration bound (excess due to path acceleration and jerk) are
+   lowered around it in proportion and that sequence is planned again. A sequence that still
+   exceeds a limit after ``max_refinements`` rounds gets a :class:`PlanningError`: nothing is
+   returned unchecked.
+
+Every step is vectorised over all the sequences together (arrays concatenated, each element
+knowing its sequence); only the TOPP2 solve runs once per sequence. Positions within a sequence
+are kept local (s in [0, 1], t from 0), so precision does not depend on the program's length.
+
+Block durations are the times between the path parameter values of the waypoints, so sampling
+at the cumulative durations gives back the waypoints.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Literal
+
+import numpy as np
+from scipy.interpolate import PPoly
+from scipy.linalg import solve_banded
+
+from .timing import DOF, TIP_EPS, Limits, PlanningError
+from .topp import Engine, ToppError, solver
+
+__all__ = ["FeedPlan", "plan_feed", "plan_feeds"]
+
+logger = logging.getLogger(__name__)
+
+_ACC_MARGIN = 0.97  # share of the acceleration limits given to TOPP2 (the filter mixes neighbours)
+_JERK_CAP_MARGIN = 0.7  # share of the jerk limits for the centripetal-jerk velocity cap
+_FIR_FACTOR = 1.25  # widest filter: w = factor * max_j(a_j / J_j), where full acceleration is used
+_ERODE = 0.5  # a cap holds over _ERODE * w * (its own speed) of travel on either side of its point
+_GRID_PER_WINDOW = 4  # target grid intervals per filter width, at the capped speed
+_MIN_INTERVALS = 32
+_MAX_INTERVALS_PER_BLOCK = 1.0  # grid intervals per block, on average at most (plus a constant)
+# (acceleration factor, time-scale factor) tried in turn when the TOPP2 engine fails numerically
+_RETRIES = ((1.0, 1.0), (0.999, 0.1), (0.99, 0.43), (0.98, 2.3), (0.97, 10.0))
+_MAX_PIECE_SAMPLES = 64  # verification samples per piece of the time law (see _verify)
+_VERIFY_CHUNK = 1 << 16  # samples evaluated together (bounded memory)
+_VERIFY_TOL = 1e-6  # relative excess tolerated by the verification (rounding)
+_SHRINK = 0.97  # extra factor applied when lowering caps after a violation
+_SPAN = 1.0 + 1e-9  # local coordinates are divided by their range times this to make search keys
+
+
+@dataclass(frozen=True, eq=False)
+class FeedPlan:
+    """Time law of one feed sequence.
+
+    ``durations[k]`` (s) is the time from waypoint k to k + 1; ``block_times`` (K + 1,) their
+    cumulative sum from 0. ``path`` is the joint-space spline q(s) through the waypoints
+    (at ``waypoint_s``), ``profile`` the path parameter s(t) (piecewise polynomial in t, C2
+    when planned with jerk limits).
+    """
+
+    durations: np.ndarray  # (K,) s
+    block_times: np.ndarray  # (K + 1,) s, block_times[0] = 0, block_times[-1] = total
+    waypoint_s: np.ndarray  # (K + 1,) path parameter of the waypoints, 0 .. 1
+    path: PPoly  # q(s): (5,) mm/rad, a cubic per block
+    profile: PPoly  # s(t)
+    filter_width: float  # s, width of the jerk filter (0 without jerk limiting)
+    gridpoints: int  # TOPP2 gridpoints used
+    refinements: int  # local cap reductions needed to meet every limit
+
+    @property
+    def total(self) -> float:
+        """Duration of the whole sequence (s)."""
+        return float(self.block_times[-1])
+
+    def sample_path(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Path parameter s and its first three time derivatives at times ``t`` (s, clipped to 0..total)."""
+        t = np.clip(np.asarray(t, dtype=float).reshape(-1), 0.0, self.total)
+        s = np.clip(self.profile(t), 0.0, 1.0)
+        return s, self.profile(t, 1), self.profile(t, 2), self.profile(t, 3)
+
+    def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Joint positions, velocities, accelerations (n, 5) each (mm, rad, per s) at times ``t`` (s)."""
+        q, qd, qdd, _ = self.sample_all(t)
+        return q, qd, qdd
+
+    def sample_all(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Joint positions, velocities, accelerations and jerks (n, 5) each at times ``t`` (s)."""
+        s, sd, sdd, sddd = self.sample_path(t)
+        q = self.path(s)
+        q1, q2, q3 = self.path(s, 1), self.path(s, 2), self.path(s, 3)
+        sd_, sdd_, sddd_ = sd[:, None], sdd[:, None], sddd[:, None]
+        return q, q1 * sd_, q1 * sdd_ + q2 * sd_ ** 2, q1 * sddd_ + 3.0 * q2 * sd_ * sdd_ + q3 * sd_ ** 3
+
+    def block_index(self, t: np.ndarray) -> np.ndarray:
+        """Index of the block (0..K-1) being run at times ``t`` (s)."""
+        t = np.asarray(t, dtype=float)
+        return np.clip(np.searchsorted(self.block_times, t, side="right") - 1, 0, len(self.durations) - 1)
+
+
+def plan_feed(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits, *, angular_feed: float,
+              min_duration: float = 1e-4, jerk: bool = True, max_turn: float = math.radians(30.0),
+              max_refinements: int = 12, engine: Engine = "copp") -> FeedPlan:
+    """Plan the time law of one continuous feed sequence (see :func:`plan_feeds`); raises its
+    :class:`PlanningError`."""
+    (plan,) = plan_feeds([(joints, tip, feed)], limits, angular_feed=angular_feed, min_duration=min_duration,
+                         jerk=jerk, max_turn=max_turn, max_refinements=max_refinements, engine=engine)
+    if isinstance(plan, PlanningError):
+        raise plan
+    return plan
+
+
+def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], limits: Limits, *,
+               angular_feed: float, min_duration: float = 1e-4, jerk: bool = True,
+               max_turn: float = math.radians(30.0), max_refinements: int = 12, engine: Engine = "copp"
+               ) -> list[FeedPlan | PlanningError]:
+    """Plan the time laws of independent feed sequences, each from rest to rest.
+
+    Parameters
+    ----------
+    sequences : per sequence ``(joints, tip, feed)``: joints (K + 1, 5) waypoints (block end
+        positions) in mm and rad, the controller moving linearly between them; tip (K + 1, 3)
+        tool tip at the waypoints, mm, relative to the part; feed (K,) programmed feed of each
+        block, mm/s, the maximum tip speed relative to the part.
+    limits : joint velocity, acceleration and jerk limits.
+    angular_feed : rad/s, the speed limit of the rotary joints (theta1, theta2 together) on
+        rotary-only blocks (tip still).
+    min_duration : s, no block is shorter than this.
+    jerk : limit joint jerk too (otherwise the constant-acceleration TOPP2 profile is used).
+    max_turn : rad, the largest angle between consecutive blocks (in joint space weighted by
+        1 / velocity limit) that is accepted; sharper corners must be split by the caller.
+    max_refinements : rounds of local slow-down allowed to meet every limit.
+    engine : the TOPP2 engine, ``"copp"`` (copp-py) or ``"toppra"`` (the reference).
+
+    Returns, per sequence, its plan or the :class:`PlanningError` that names the waypoint
+    where a corner is too sharp, a block has no motion, the engine failed, or no plan within
+    the limits was found. Raises ValueError for malformed input.
+    """
+    if not isinstance(limits, Limits):
+        raise TypeError("limits must be a verne_post.timing.Limits")
+    if not (math.isfinite(angular_feed) and angular_feed > 0):
+        raise ValueError(f"angular_feed must be positive (rad/s), got {angular_feed}")
+    if not (math.isfinite(min_duration) and min_duration >= 0):
+        raise ValueError(f"min_duration must be >= 0 (s), got {min_duration}")
+    solver(engine)  # an unknown engine is refused before any work
+    if not sequences:
+        return []
+    joints, tip, feed, first = _concatenate(sequences)
+    results: list[FeedPlan | PlanningError | None] = [None] * (len(first) - 1)
+    refused = _refusals(joints, first, limits, max_turn)
+    for r, error in refused.items():
+        results[r] = error
+    valid = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
+    if len(valid):
+        rows = _ranges(first[valid], first[valid + 1])
+        blocks = _ranges(first[valid] - valid, first[valid + 1] - valid - 1)
+        batch = _Batch.of(joints[rows], tip[rows], feed[blocks], np.r_[0, np.cumsum(np.diff(first)[valid])], limits,
+                          angular_feed, min_duration, jerk)
+        for r, plan in zip(valid, _Planner(batch, engine, max_refinements).plan(), strict=True):
+            results[r] = plan
+    return results  # type: ignore[return-value]
+
+
+# --------------------------------------------------------------------------------------------
+# Segmented arrays: many sequences in one array, each element knowing its sequence
+# --------------------------------------------------------------------------------------------
+
+
+def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Concatenation of arange(start[i], stop[i]) over i."""
+    count = np.maximum(stop - start, 0)
+    offset = np.repeat(start - np.r_[0, np.cumsum(count)[:-1]], count)
+    return np.arange(int(count.sum())) + offset
+
+
+def _segment_cumsum(values: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Per segment, the running sum of ``values`` from 0 (segments begin at ``start``, with a
+    last entry = len(values)); the sums restart at each segment, so they are as exact as a
+    running sum of each segment alone (long double)."""
+    total = np.concatenate([[0.0], np.cumsum(values.astype(np.longdouble))])
+    owner = np.repeat(np.arange(len(start) - 1), np.diff(start))
+    return (total[1:] - total[start[:-1]][owner]).astype(float)
+
+
+@dataclass(frozen=True, eq=False)
+class _Pieces:
+    """Piecewise cubics of many sequences: pieces grouped by sequence, in local coordinates.
+
+    ``start`` (P,) local start of each piece; ``first`` (R + 1,) offsets of each sequence's
+    pieces; ``span`` (R,) a bound on each sequence's local coordinate; ``coef`` (4, P) or
+    (4, D, P) cubic coefficients (highest first) in (x - start), or None for a plain sorted
+    grid. Vector values come out dimension-major, (D, n): each joint's row is contiguous.
+    """
+
+    start: np.ndarray
+    first: np.ndarray
+    span: np.ndarray
+    coef: np.ndarray | None = None
+
+    @cached_property
+    def owner(self) -> np.ndarray:
+        return np.repeat(np.arange(len(self.first) - 1), np.diff(self.first))
+
+    @cached_property
+    def _keys(self) -> np.ndarray:
+        # Sequence number plus the position scaled into [0, 1): one sorted array for every search.
+        return self.owner + self.start / (self.span[self.owner] * _SPAN)
+
+    def search(self, seq: np.ndarray, x: np.ndarray, side: Literal["left", "right"] = "right") -> np.ndarray:
+        """np.searchsorted of local positions x among the starts of sequence seq (global index)."""
+        return np.searchsorted(self._keys, seq + x / (self.span[seq] * _SPAN), side=side)
+
+    def clip(self, seq: np.ndarray, index: np.ndarray) -> np.ndarray:
+        """Indices clipped into the pieces of their sequences."""
+        return np.clip(index, self.first[seq], self.first[seq + 1] - 1)
+
+    def locate(self, seq: np.ndarray, x: np.ndarray, side: Literal["left", "right"] = "right") -> np.ndarray:
+        """Piece holding local position x of sequence seq (its first or last piece outside)."""
+        return self.clip(seq, self.search(seq, x, side) - 1)
+
+    def __call__(self, piece: np.ndarray, x: np.ndarray, order: int = 0) -> np.ndarray:
+        """Derivative ``order`` (0..3) at local positions x, each in its ``piece``."""
+        return self.derivatives(piece, x, (order,))[0]
+
+    def derivatives(self, piece: np.ndarray, x: np.ndarray, orders: tuple[int, ...]) -> list[np.ndarray]:
+        """Derivatives of the given orders (0..3) at local positions x, each in its ``piece``."""
+        assert self.coef is not None
+        tau = x - self.start[piece]
+        c3, c2, c1, c0 = self.coef[..., piece]
+        out = {0: lambda: ((c3 * tau + c2) * tau + c1) * tau + c0, 1: lambda: (3.0 * c3 * tau + 2.0 * c2) * tau + c1,
+               2: lambda: 6.0 * c3 * tau + 2.0 * c2, 3: lambda: 6.0 * c3 + 0.0 * tau}
+        return [out[order]() for order in orders]
+
+
+def _not_a_knot(x: np.ndarray, y: np.ndarray, first: np.ndarray) -> np.ndarray:
+    """Cubic coefficients (4, N - R, D) of the not-a-knot splines through (x, y) per sequence.
+
+    x (N,) strictly increasing within each sequence; y (N, D); ``first`` (R + 1,) offsets.
+    The same splines as scipy's ``CubicSpline(x, y, bc_type="not-a-knot")`` (a straight line
+    through 2 points, a parabola through 3), solved as one tridiagonal system for the slopes.
+    """
+    n = np.diff(first)
+    owner = np.repeat(np.arange(len(n)), n)
+    local = np.arange(len(x)) - first[:-1][owner]
+    size = n[owner]
+    last = local == size - 1
+    dx = np.diff(x)
+    slope = np.diff(y, axis=0) / dx[:, None]
+    # Row i couples slopes i - 1, i, i + 1: dx[i] m[i-1] + 2 (dx[i-1] + dx[i]) m[i] + dx[i-1] m[i+1].
+    diag = np.ones(len(x))
+    upper = np.zeros(len(x))  # element (i, i + 1)
+    lower = np.zeros(len(x))  # element (i, i - 1)
+    rhs = np.zeros_like(y, dtype=float)
+    inner = np.flatnonzero((local > 0) & ~last & (size >= 4))
+    diag[inner] = 2.0 * (dx[inner - 1] + dx[inner])
+    upper[inner] = dx[inner - 1]
+    lower[inner] = dx[inner]
+    rhs[inner] = 3.0 * (dx[inner, None] * slope[inner - 1] + dx[inner - 1, None] * slope[inner])
+    head = np.flatnonzero((local == 0) & (size >= 4))
+    d = x[head + 2] - x[head]
+    diag[head] = dx[head + 1]
+    upper[head] = d
+    rhs[head] = (((dx[head] + 2.0 * d) * dx[head + 1])[:, None] * slope[head]
+                 + (dx[head] ** 2)[:, None] * slope[head + 1]) / d[:, None]
+    tail = np.flatnonzero(last & (size >= 4))
+    d = x[tail] - x[tail - 2]
+    diag[tail] = dx[tail - 2]
+    lower[tail] = d
+    rhs[tail] = ((dx[tail - 1] ** 2)[:, None] * slope[tail - 2]
+                 + ((2.0 * d + dx[tail - 1]) * dx[tail - 2])[:, None] * slope[tail - 1]) / d[:, None]
+    # Two points: the chord. Three: the parabola through them (its slopes at the three nodes).
+    two = np.flatnonzero(size == 2)
+    rhs[two] = slope[np.where(local[two] == 0, two, two - 1)]
+    three = np.flatnonzero((size == 3) & (local == 0))
+    for k in range(3):
+        node = three + k
+        h0, h1 = dx[three], dx[three + 1]
+        curvature = (slope[three + 1] - slope[three]) / (h0 + h1)[:, None]
+        offset = (-h0, h0, h0 + 2.0 * h1)[k]
+        rhs[node] = slope[three] + curvature * offset[:, None]
+    banded = np.zeros((3, len(x)))
+    banded[0, 1:] = upper[:-1]
+    banded[1] = diag
+    banded[2, :-1] = lower[1:]
+    m = solve_banded((1, 1), banded, rhs)
+    block = np.flatnonzero(~last)  # block b starts at node b (global node index)
+    h = dx[block][:, None]
+    m0, m1, chord = m[block], m[block + 1], slope[block]
+    return np.stack([(m0 + m1 - 2.0 * chord) / h ** 2, (3.0 * chord - 2.0 * m0 - m1) / h, m0, y[block]])
+
+
+def _range_chmin(n: int, lo: np.ndarray, hi: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """out[i] = min(values[m] for every m with lo[m] <= i <= hi[m]) (inf where none), vectorised.
+
+    Each update is written to the two power-of-two blocks covering its range, then the blocks
+    are pushed down level by level (a sparse table used in reverse).
+    """
+    length = hi - lo + 1
+    level = np.floor(np.log2(np.maximum(length, 1))).astype(int)
+    top = int(level.max()) if len(level) else 0
+    table = np.full((top + 1, n), np.inf)
+    np.minimum.at(table, (level, lo), values)
+    np.minimum.at(table, (level, hi - (1 << level) + 1), values)
+    for k in range(top, 0, -1):
+        half = 1 << (k - 1)
+        np.minimum(table[k - 1], table[k], out=table[k - 1])
+        table[k - 1, half:] = np.minimum(table[k - 1, half:], table[k, : n - half])
+    return table[0]
+
+
+def _range_max(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """max(values[lo..hi]) for inclusive index arrays lo <= hi (sparse table)."""
+    n = len(values)
+    levels = [values]
+    step = 1
+    while 2 * step <= n:
+        prev = levels[-1]
+        nxt = np.full_like(values, -np.inf)
+        nxt[: n - 2 * step + 1] = np.maximum(prev[: n - 2 * step + 1], prev[step: n - step + 1])
+        levels.append(nxt)
+        step *= 2
+    table = np.stack(levels)
+    level = np.floor(np.log2(hi - lo + 1)).astype(int)
+    return np.maximum(table[level, lo], table[level, hi - (1 << level) + 1])
+
+
+# --------------------------------------------------------------------------------------------
+# The sequences' geometry and caps
+# --------------------------------------------------------------------------------------------
+
+
+def _concatenate(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Checked, concatenated (joints, tip, feed) and the waypoint offsets (R + 1,)."""
+    joints, tips, feeds = [], [], []
+    for r, (q, tip, feed) in enumerate(sequences):
+        q = np.asarray(q, dtype=float)
+        tip = np.asarray(tip, dtype=float)
+        feed = np.asarray(feed, dtype=float).reshape(-1)
+        where = f" (sequence {r})" if len(sequences) > 1 else ""
+        if q.ndim != 2 or q.shape[1] != DOF or len(q) < 2:
+            raise ValueError(f"joints must be (K + 1, 5) with K >= 1, got {q.shape}{where}")
+        if tip.shape != (len(q), 3):
+            raise ValueError(f"tip must be ({len(q)}, 3), got {tip.shape}{where}")
+        if feed.shape != (len(q) - 1,):
+            raise ValueError(f"feed must be ({len(q) - 1},) (one per block), got {feed.shape}{where}")
+        joints.append(q)
+        tips.append(tip)
+        feeds.append(feed)
+    first = np.r_[0, np.cumsum([len(q) for q in joints])]
+    q, tip, feed = np.concatenate(joints), np.concatenate(tips), np.concatenate(feeds)
+    block_first = first - np.arange(len(first))
+    for name, value, offset in (("joints", q, first), ("tip", tip, first), ("feed", feed, block_first)):
+        bad = np.flatnonzero(~np.all(np.isfinite(value.reshape(len(value), -1)), axis=1))
+        if len(bad):
+            r = int(np.searchsorted(offset, bad[0], side="right") - 1)
+            raise ValueError(f"{name} is not finite at index {bad[0] - offset[r]}"
+                             + (f" (sequence {r})" if len(sequences) > 1 else ""))
+    bad = np.flatnonzero(feed <= 0)
+    if len(bad):
+        r = int(np.searchsorted(block_first, bad[0], side="right") - 1)
+        raise ValueError(f"feed must be positive (mm/s), block {bad[0] - block_first[r]} has {feed[bad[0]]}"
+                         + (f" (sequence {r})" if len(sequences) > 1 else ""))
+    return q, tip, feed, first
+
+
+def _refusals(joints: np.ndarray, first: np.ndarray, limits: Limits, max_turn: float) -> dict[int, PlanningError]:
+    """Sequences that cannot be planned at all: a block without joint motion, a sharp corner."""
+    bfirst = first - np.arange(len(first))
+    bseq = np.repeat(np.arange(len(first) - 1), np.diff(bfirst))
+    left = np.arange(len(bseq)) + bseq
+    step = (joints[left + 1] - joints[left]) / limits.velocity
+    weighted = np.linalg.norm(step, axis=1)
+    total = np.add.reduceat(weighted, bfirst[:-1])
+    errors: dict[int, PlanningError] = {}
+    for b in np.flatnonzero(weighted <= 1e-12 * np.maximum(total[bseq], 1e-300)):
+        r, k = int(bseq[b]), int(b - bfirst[bseq[b]])
+        errors.setdefault(r, PlanningError(f"feed block {k} (waypoints {k} to {k + 1}) has no joint motion: drop "
+                                           f"repeated waypoints", k))
+    direction = step / np.maximum(weighted, 1e-300)[:, None]
+    turn = np.arccos(np.clip(np.sum(direction[:-1] * direction[1:], axis=1), -1.0, 1.0))
+    for b in np.flatnonzero((turn > max_turn) & (bseq[:-1] == bseq[1:])):
+        r, i = int(bseq[b]), int(b - bfirst[bseq[b]]) + 1
+        errors.setdefault(r, PlanningError(f"corner of {math.degrees(turn[b]):.1f} deg at waypoint {i} is sharper "
+                                           f"than {math.degrees(max_turn):.1f} deg: split the feed sequence there", i))
+    return errors
+
+
+@dataclass(frozen=True, eq=False)
+class _Batch:
+    """Sequences to plan, concatenated: R sequences, W waypoints, B = W - R blocks."""
+
+    limits: Limits
+    jerk: bool
+    wfirst: np.ndarray  # (R + 1,) waypoint offsets
+    bfirst: np.ndarray  # (R + 1,) block offsets
+    s: np.ndarray  # (W,) local path parameter of the waypoints
+    path: _Pieces  # q(s), a cubic per block, (4, 5, B)
+    tip: _Pieces  # tip(s), the same parameter, (4, 3, B)
+    tip_feed: np.ndarray  # (B,) mm/s, inf on rotary-only blocks
+    block_cap: np.ndarray  # (B,) sdot cap of each block (feed, angular feed, minimum duration)
+
+    @property
+    def count(self) -> int:
+        return len(self.wfirst) - 1
+
+    @classmethod
+    def of(cls, joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, first: np.ndarray, limits: Limits,
+           angular_feed: float, min_duration: float, jerk: bool) -> _Batch:
+        count = len(first) - 1
+        bfirst = first - np.arange(count + 1)
+        bseq = np.repeat(np.arange(count), np.diff(bfirst))
+        left = np.arange(len(bseq)) + bseq
+        dq = joints[left + 1] - joints[left]
+        weighted = np.linalg.norm(dq / limits.velocity, axis=1)
+        s = np.zeros(len(joints))
+        s[left + 1] = _segment_cumsum(weighted, bfirst) / np.add.reduceat(weighted, bfirst[:-1])[bseq]
+        s[first[1:] - 1] = 1.0
+        ds = s[left + 1] - s[left]
+        coef = np.ascontiguousarray(_not_a_knot(s, np.hstack([joints, tip]), first).transpose(0, 2, 1))
+        ones = np.ones(count)
+        length = np.linalg.norm(tip[left + 1] - tip[left], axis=1)
+        rotary_only = length < TIP_EPS
+        rotary = np.linalg.norm(dq[:, 3:], axis=1)
+        with np.errstate(divide="ignore"):
+            tip_cap = np.where(rotary_only, np.inf, feed * ds / np.maximum(length, 1e-300))
+            rot_cap = np.where(rotary_only & (rotary > 0), angular_feed * ds / np.maximum(rotary, 1e-300), np.inf)
+            dur_cap = ds / min_duration if min_duration > 0 else np.full(len(ds), np.inf)
+        return cls(limits, jerk, first, bfirst, s, _Pieces(s[left], bfirst, ones, coef[:, :DOF]),
+                   _Pieces(s[left], bfirst, ones, coef[:, DOF:]), np.where(rotary_only, np.inf, feed),
+                   np.minimum(np.minimum(tip_cap, rot_cap), dur_cap))
+
+    def point_cap(self, seq: np.ndarray, c: np.ndarray) -> np.ndarray:
+        """Squared path-speed caps at local path parameters c: joint velocity, tip feed,
+        centripetal jerk, and the caps of the block(s) c lies in."""
+        lim = self.limits
+        right = self.path.locate(seq, c, "right")
+        left = self.path.locate(seq, c, "left")
+        q1 = np.abs(self.path(right, c, 1))
+        feed = np.minimum(self.tip_feed[left], self.tip_feed[right])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.min((lim.velocity[:, None] / q1) ** 2, axis=0)
+            x = np.minimum(x, np.nan_to_num((feed / np.linalg.norm(self.tip(right, c, 1), axis=0)) ** 2, nan=np.inf))
+            if self.jerk:
+                q3 = np.abs(self.path(right, c, 3))
+                x = np.minimum(x, np.min((_JERK_CAP_MARGIN * lim.jerk[:, None] / q3) ** (2.0 / 3.0), axis=0))
+        return np.minimum(np.minimum(x, np.minimum(self.block_cap[left], self.block_cap[right]) ** 2), 1e300)
+
+    def waypoint_at(self, seq: int, c: float) -> int:
+        """Index (within its sequence) of the first waypoint at or after local path parameter c."""
+        s = self.s[self.wfirst[seq]:self.wfirst[seq + 1]]
+        return int(np.clip(np.searchsorted(s, c - 1e-12, side="left"), 0, len(s) - 1))
+
+
+def _sorted_points(seq: np.ndarray, x: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points (seq, local x) sorted by sequence then x, exact repeats dropped; with offsets (R + 1,)."""
+    order = np.lexsort((x, seq))
+    seq, x = seq[order], x[order]
+    keep = np.r_[True, (seq[1:] != seq[:-1]) | (x[1:] != x[:-1])]
+    seq, x = seq[keep], x[keep]
+    return seq, x, np.searchsorted(seq, np.arange(count + 1))
+
+
+# --------------------------------------------------------------------------------------------
+# The planner
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Profiles:
+    """s(t) of some sequences: cubic pieces in local time, breaks per sequence (with the end)."""
+
+    seqs: np.ndarray  # (S,) sequence numbers, in order
+    breaks: np.ndarray  # (P + S,) local times
+    bfirst: np.ndarray  # (S + 1,) offsets into breaks
+    coef: np.ndarray  # (4, P), highest first
+
+    @cached_property
+    def pieces(self) -> _Pieces:
+        pfirst = self.bfirst - np.arange(len(self.bfirst))
+        ends = self.bfirst[1:] - 1
+        starts = np.delete(self.breaks, ends)
+        return _Pieces(starts, pfirst, np.maximum(self.breaks[ends], 1e-300), self.coef)
+
+    @property
+    def total(self) -> np.ndarray:
+        return self.breaks[self.bfirst[1:] - 1]
+
+
+class _Planner:
+    """All the sequences of a batch: grid and caps once, then TOPP2, filter and verification in
+    rounds, each round over the sequences not yet within every limit."""
+
+    def __init__(self, batch: _Batch, engine: Engine, max_refinements: int) -> None:
+        self.batch, self.engine, self.solve, self.max_refinements = batch, engine, solver(engine), max_refinements
+        lim = batch.limits
+        count = batch.count
+        path, s, bfirst = batch.path, batch.s, batch.bfirst
+        bseq = path.owner
+        ds = np.diff(s)[np.arange(len(bseq)) + bseq]
+        mids = path.start + 0.5 * ds
+        x_mid = batch.point_cap(bseq, mids)
+        tau = ds / np.sqrt(x_mid)  # s per block at its cap
+        t_est = np.add.reduceat(tau, bfirst[:-1])
+        self.t_scale = np.maximum(t_est, 1e-6)
+        # Filter width per sequence (module docstring, step 3): long enough to ramp the fastest
+        # joint to its capped speed with its jerk limit, at most where full acceleration pays.
+        self.widest = widest = _FIR_FACTOR * float(np.max(lim.acceleration / lim.jerk))
+        if batch.jerk:
+            ramp = np.sqrt(np.max(np.abs(path(np.arange(len(bseq)), mids, 1)) * np.sqrt(x_mid) / lim.jerk[:, None],
+                                  axis=0))
+            self.w = np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]), widest)
+        else:
+            self.w = np.zeros(count)
+        blocks = np.diff(bfirst)
+        delta = (self.w if batch.jerk else np.full(count, 0.05)) / _GRID_PER_WINDOW
+        delta = np.maximum(np.minimum(delta, t_est / _MIN_INTERVALS), t_est / (_MAX_INTERVALS_PER_BLOCK * blocks
+                                                                                + _MIN_INTERVALS))
+        # Gridpoints: waypoints where the travel time at the caps crosses a multiple of delta,
+        # long blocks subdivided, and a geometrically refined start and end (from and to rest).
+        wseq = np.repeat(np.arange(count), np.diff(batch.wfirst))
+        cum = np.zeros(len(s))
+        cum[np.arange(len(bseq)) + bseq + 1] = _segment_cumsum(tau, bfirst)
+        bucket = np.floor(cum / delta[wseq])
+        keep = np.r_[True, (bucket[1:] != bucket[:-1]) | (wseq[1:] != wseq[:-1])]
+        keep[batch.wfirst[1:] - 1] = True
+        long = tau > delta[bseq]
+        left = np.flatnonzero(long) + bseq[long]
+        keep[left] = keep[left + 1] = True
+        parts = np.maximum(np.round(tau[long] / delta[bseq[long]]), 1).astype(int)
+        owner = np.repeat(np.arange(len(parts)), parts)
+        step = np.arange(int(parts.sum())) - np.repeat(np.cumsum(parts) - parts, parts)
+        inner = step > 0
+        owner, step = owner[inner], step[inner]
+        interior = path.start[long][owner] + ds[long][owner] * step / parts[owner]
+        kept = np.flatnonzero(keep)
+        kfirst = np.searchsorted(kept, batch.wfirst)
+        second, penultimate = s[kept[kfirst[:-1] + 1]], s[kept[kfirst[1:] - 2]]
+        ends = (np.minimum(second, 1.0 - penultimate)[:, None] * 0.5 ** np.arange(1, 5)).ravel()
+        end_seq = np.repeat(np.arange(count), 4)
+        gseq, grid, gfirst = _sorted_points(np.concatenate([wseq[kept], bseq[long][owner], end_seq, end_seq]),
+                                            np.concatenate([s[kept], interior, ends, 1.0 - ends]), count)
+        self.grid = _Pieces(grid, gfirst, np.ones(count))
+        n = len(grid)
+        # Check points: the gridpoints, the middles of their intervals, the waypoints, the block middles.
+        inner_grid = np.flatnonzero(np.diff(gseq) == 0)
+        cseq, check, cfirst = _sorted_points(
+            np.concatenate([gseq, gseq[inner_grid], wseq, bseq]),
+            np.concatenate([grid, 0.5 * (grid[inner_grid] + grid[inner_grid + 1]), s, mids]), count)
+        checks = _Pieces(check, cfirst, np.ones(count))
+        raw = batch.point_cap(cseq, check)
+        # With the filter, the speed at a point mixes the speeds within half a filter width of
+        # travel around it: each check point imposes its cap over _ERODE * w * (its own capped
+        # speed) on either side, and a gridpoint takes the lowest cap reaching its two grid
+        # intervals (the squared speed is linear in s between gridpoints).
+        reach = _ERODE * self.w[cseq] * np.sqrt(raw)
+        lo = self.grid.clip(cseq, self.grid.search(cseq, check - reach, "left") - 1)
+        hi = self.grid.clip(cseq, self.grid.search(cseq, check + reach, "right"))
+        self.xcap = _range_chmin(n, lo, hi, raw)
+        index = np.arange(n)
+        lo0 = grid[np.maximum(index - 1, gfirst[gseq])]
+        hi0 = grid[np.minimum(index + 1, gfirst[gseq + 1] - 1)]
+        r = _ERODE * self.w[gseq] * np.sqrt(self.xcap)
+        self.radius = np.maximum(r, np.maximum(grid - lo0, hi0 - grid))
+        # Path acceleration bound: the filter spreads a path acceleration over its window, where
+        # |q_j'| may be larger than at the gridpoint; |sddot| <= a_j / max over the window |q_j'|,
+        # and u / w within the jerk limit: |sddot| <= w J_j / max |q_j'|.
+        a = checks.clip(gseq, checks.search(gseq, np.minimum(grid - r, lo0), "left"))
+        b = np.maximum(a, checks.clip(gseq, checks.search(gseq, np.maximum(grid + r, hi0), "right") - 1))
+        usable = lim.acceleration[:, None]
+        if batch.jerk:
+            usable = np.minimum(usable, self.w[cseq] * lim.jerk[:, None])
+        need = np.max(np.abs(batch.path(batch.path.locate(cseq, check), check, 1)) / usable, axis=0)
+        with np.errstate(divide="ignore"):
+            self.umax = np.minimum(1.0 / _range_max(need, a, b), 1e300)
+        piece = batch.path.locate(gseq, grid)
+        self.q1, self.q2 = (d.T for d in batch.path.derivatives(piece, grid, (1, 2)))  # (G, 5)
+        self.gseq = gseq
+
+    # -- rounds ---------------------------------------------------------------------------------
+
+    def plan(self) -> list[FeedPlan | PlanningError]:
+        count = self.batch.count
+        results: list[FeedPlan | PlanningError | None] = [None] * count
+        n = len(self.grid.start)
+        cap = np.full(n, np.inf)
+        acc_scale = np.full(n, _ACC_MARGIN if self.batch.jerk else 1.0)
+        base = self.xcap * (1.0 - 4e-5)  # the engines may exceed their bounds by rounding: keep clear
+        x = np.zeros(n)
+        active = np.arange(count)
+        worst: dict[int, tuple[float, float, float, float]] = {}
+        for attempt in range(self.max_refinements + 1):
+            solved = []
+            for r in active:
+                outcome = self._topp(int(r), np.minimum(base, cap), acc_scale)
+                if isinstance(outcome, PlanningError):
+                    results[r] = outcome
+                else:
+                    x[self.grid.first[r]:self.grid.first[r + 1]] = outcome
+                    solved.append(r)
+            if not solved:
+                break
+            profiles, stuck = self._profiles(np.array(solved), x)
+            for r, error in stuck.items():
+                results[r] = error
+            times, broken = self._block_times(profiles)
+            for r, error in broken.items():
+                results[r] = error
+            good = ~np.isin(profiles.seqs, list(broken))
+            where, fx, fa, seq, ratios = self._verify(profiles, times, good)
+            failing = np.unique(seq)
+            for k in np.flatnonzero(good & ~np.isin(profiles.seqs, failing)):
+                results[profiles.seqs[k]] = self._feed_plan(int(profiles.seqs[k]), profiles, int(k), times, attempt)
+            if not len(failing):
+                break
+            for r in failing:
+                mine = seq == r
+                top = int(np.argmax(np.max(ratios[mine], axis=1)))
+                worst[int(r)] = (*ratios[mine][top], float(where[mine][top]))
+            # Lower the caps and the acceleration bound around each violation, in proportion, over
+            # the stretch the filter window there can span (twice the erosion radius, and the
+            # neighbouring gridpoints).
+            grid = self.grid
+            nearest = np.clip(grid.search(seq, where), grid.first[seq] + 1, grid.first[seq + 1] - 1)
+            reach = 2.0 * np.maximum(self.radius[nearest], self.radius[nearest - 1])
+            lo = grid.clip(seq, grid.search(seq, where - reach, "left") - 1)
+            hi = grid.clip(seq, grid.search(seq, where + reach, "right"))
+            fx_grid = np.minimum(_range_chmin(n, lo, hi, fx), 1.0)
+            fa_grid = np.minimum(_range_chmin(n, lo, hi, fa), 1.0)
+            cap = np.minimum(cap, np.where(fx_grid < 1.0, fx_grid * np.maximum(x, 0.0), np.inf))
+            acc_scale = acc_scale * fa_grid
+            logger.debug("feed plan round %d: %d sequences over the limits", attempt, len(failing))
+            active = failing
+        kinds = ("velocity or feed", "acceleration", "jerk")
+        for r, (*ratio, at) in worst.items():
+            if results[r] is None:
+                kind = kinds[int(np.argmax(ratio))]
+                index = self.batch.waypoint_at(r, at)
+                results[r] = PlanningError(
+                    f"no time law within the joint {kind} limits found near waypoint {index} after "
+                    f"{self.max_refinements} refinements (worst ratio {max(ratio):.3f}): the jerk/acceleration "
+                    f"limits cannot be met along this path", index)
+        assert all(result is not None for result in results)
+        return results  # type: ignore[return-value]
+
+    def _topp(self, r: int, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | PlanningError:
+        """Squared path speeds (1/s^2) at the gridpoints of sequence r, time-optimal under xmax
+        and the accelerations.
+
+        An engine may lose a reachable set to rounding; the same problem is then solved again at
+        another time scale, with the acceleration limits 0.1 to 2 % lower (stricter, never looser).
+        """
+        g = slice(self.grid.first[r], self.grid.first[r + 1])
+        lim = self.batch.limits
+        failure = None
+        for tighten, rescale in _RETRIES:
+            t0 = self.t_scale[r] * rescale
+            scale = acc_scale[g] * tighten
+            inverse = 1.0 / (scale[:, None] * lim.acceleration[None, :] * t0 ** 2)
+            umax = scale * self.umax[g] * t0 ** 2 if self.batch.jerk else None
+            try:
+                x = self.solve(self.grid.start[g], np.maximum(xmax[g], 0.0) * t0 ** 2, umax, self.q1[g] * inverse,
+                               self.q2[g] * inverse) / t0 ** 2
+            except ToppError as error:
+                failure = error
+                logger.debug("%s failed (accelerations x %s, time scale x %s): %s", self.engine, tighten, rescale,
+                             error)
+                continue
+            x[0] = x[-1] = 0.0
+            return x
+        where = 0 if failure is None or failure.index is None else self.batch.waypoint_at(
+            r, float(self.grid.start[g][min(failure.index, g.stop - g.start - 1)]))
+        return PlanningError(f"{self.engine} found no feasible time law near waypoint {where} (instance not "
+                             f"controllable or numerically ill-conditioned)", where)
+
+    # -- the time law ---------------------------------------------------------------------------
+
+    def _profiles(self, seqs: np.ndarray, x: np.ndarray) -> tuple[_Profiles, dict[int, PlanningError]]:
+        """s(t) of the sequences ``seqs`` from their squared path speeds x at the gridpoints: the
+        constant-acceleration profile, filtered when jerk is limited."""
+        grid = self.grid
+        stuck: dict[int, PlanningError] = {}
+        v_all = np.sqrt(np.maximum(x, 0.0))
+        zero = np.flatnonzero((v_all[:-1] + v_all[1:] <= 0) & (grid.owner[:-1] == grid.owner[1:]))
+        for i in zero[np.isin(grid.owner[zero], seqs)]:
+            r = int(grid.owner[i])
+            if r not in stuck:
+                where = self.batch.waypoint_at(r, float(grid.start[i]))
+                stuck[r] = PlanningError(f"the planned path speed drops to zero near waypoint {where}", where)
+        seqs = np.array([r for r in seqs if r not in stuck], dtype=int)
+        counts = grid.first[seqs + 1] - grid.first[seqs]
+        gi = _ranges(grid.first[seqs], grid.first[seqs + 1])
+        nfirst = np.r_[0, np.cumsum(counts)]
+        owner = np.repeat(np.arange(len(seqs)), counts)
+        s_nodes, v = grid.start[gi], v_all[gi]
+        inner = np.flatnonzero(owner[1:] == owner[:-1])
+        dgrid = s_nodes[inner + 1] - s_nodes[inner]
+        dt = 2.0 * dgrid / (v[inner] + v[inner + 1])
+        u = (x[gi][inner + 1] - x[gi][inner]) / (2.0 * dgrid)
+        ifirst = nfirst - np.arange(len(nfirst))
+        t_nodes = np.zeros(len(gi))
+        t_nodes[inner + 1] = _segment_cumsum(dt, ifirst)
+        if not self.batch.jerk:
+            coef = np.stack([np.zeros_like(u), 0.5 * u, v[inner], s_nodes[inner]])
+            return _Profiles(seqs, t_nodes, nfirst, coef), stuck
+        total = t_nodes[nfirst[1:] - 1]
+        w = self.w[seqs]
+        sigma = _Pieces(t_nodes[inner], ifirst, np.maximum(total, 1e-300))
+        s0, v0 = s_nodes[inner], v[inner]
+        area = s0 * dt + v0 * dt ** 2 / 2.0 + u * dt ** 3 / 6.0
+        # Integrals of sigma in long double, restarting at each sequence: ~1e-16 precision in s.
+        prefix = np.concatenate([[0.0], np.cumsum(area.astype(np.longdouble))])
+        base = prefix[ifirst]
+
+        def derivatives(k: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            i = sigma.locate(k, t)
+            tau = t - sigma.start[i]
+            before, after = t < 0.0, t >= total[k]
+            value = np.where(before, 0.0, np.where(after, 1.0, s0[i] + v0[i] * tau + u[i] * tau ** 2 / 2.0))
+            rest = before | after
+            return value, np.where(rest, 0.0, v0[i] + u[i] * tau), np.where(rest, 0.0, u[i])
+
+        def integral(k: np.ndarray, t: np.ndarray) -> np.ndarray:
+            i = sigma.locate(k, t)
+            tau = t - sigma.start[i]
+            local = (s0[i] * tau + v0[i] * tau ** 2 / 2.0 + u[i] * tau ** 3 / 6.0).astype(np.longdouble)
+            out = np.where(t <= 0.0, np.longdouble(0.0), prefix[i] - base[k] + local)
+            return np.where(t >= total[k], prefix[ifirst[k + 1]] - base[k] + (t - total[k]).astype(np.longdouble),
+                            out)
+
+        bseq, breaks, bfirst = _sorted_points(np.concatenate([owner, owner]),
+                                              np.concatenate([t_nodes, t_nodes + w[owner]]), len(seqs))
+        # Breakpoints t[i] and t[j] + w can nearly coincide: a sliver piece between them would get
+        # its third derivative from the wrong side by rounding. Pieces under a nanosecond are merged.
+        last = np.zeros(len(breaks), bool)
+        last[bfirst[1:] - 1] = True
+        keep = last.copy()
+        keep[bfirst[:-1]] = True
+        keep[:-1] |= (breaks[1:] - breaks[:-1] > 1e-9) & ~last[:-1]
+        bseq, breaks = bseq[keep], breaks[keep]
+        bfirst = np.searchsorted(bseq, np.arange(len(seqs) + 1))
+        ends = bfirst[1:] - 1
+        k = np.delete(bseq, ends)
+        left = np.delete(breaks, ends)
+        mid = left + 0.5 * (np.delete(breaks, bfirst[:-1]) - left)
+        wk = w[k]
+        value = ((integral(k, left) - integral(k, left - wk)) / wk.astype(np.longdouble)).astype(float)
+        a1, b1, _ = derivatives(k, left)
+        a0, b0, _ = derivatives(k, left - wk)
+        third = (derivatives(k, mid)[2] - derivatives(k, mid - wk)[2]) / wk
+        coef = np.stack([third / 6.0, (b1 - b0) / (2.0 * wk), (a1 - a0) / wk, value])
+        return _Profiles(seqs, breaks, bfirst, coef), stuck
+
+    def _block_times(self, profiles: _Profiles) -> tuple[tuple[np.ndarray, np.ndarray], dict[int, PlanningError]]:
+        """Times at which each sequence's s(t) reaches its waypoints: (times, offsets per sequence)."""
+        batch, pieces = self.batch, profiles.pieces
+        count = len(profiles.seqs)
+        # s at every break (the end: the last piece at its end), made nondecreasing per sequence.
+        at = np.empty(len(profiles.breaks))
+        starts = np.delete(np.arange(len(at)), profiles.bfirst[1:] - 1)
+        at[starts] = pieces.coef[3]
+        ends = profiles.bfirst[1:] - 1
+        last_piece = pieces.first[1:] - 1
+        at[ends] = pieces(last_piece, profiles.breaks[ends])
+        owner = np.repeat(np.arange(count), np.diff(profiles.bfirst))
+        at = np.maximum.accumulate(at + 2.0 * owner) - 2.0 * owner
+        levels = _Pieces(at, profiles.bfirst, np.ones(count))
+        seqs = profiles.seqs
+        wcount = batch.wfirst[seqs + 1] - batch.wfirst[seqs]
+        tfirst = np.r_[0, np.cumsum(wcount)]
+        targets_index = _ranges(batch.wfirst[seqs] + 1, batch.wfirst[seqs + 1] - 1)
+        k = np.repeat(np.arange(count), wcount - 2)
+        targets = batch.s[targets_index]
+        m = np.clip(levels.search(k, targets, "right") - 1, profiles.bfirst[k], profiles.bfirst[k + 1] - 2)
+        piece = m - k
+        h = profiles.breaks[m + 1] - profiles.breaks[m]
+        c3, c2, c1, c0 = (pieces.coef[j, piece] for j in range(4))
+        lo = np.zeros_like(targets)
+        hi = h.copy()
+        span = at[m + 1] - at[m]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = np.clip(np.where(span > 0, h * (targets - at[m]) / span, 0.5 * h), lo, hi)
+        for _ in range(60):
+            f = ((c3 * tau + c2) * tau + c1) * tau + c0 - targets
+            df = (3.0 * c3 * tau + 2.0 * c2) * tau + c1
+            lo = np.where(f < 0, tau, lo)
+            hi = np.where(f > 0, tau, hi)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                newton = tau - f / df
+            ok = (df > 0) & (newton > lo) & (newton < hi)
+            new = np.where(ok, newton, 0.5 * (lo + hi))
+            done = (f == 0) | (np.abs(new - tau) <= 1e-15 * np.maximum(h, 1.0))
+            tau = np.where(f == 0, tau, new)
+            if np.all(done):
+                break
+        times = np.zeros(tfirst[-1])
+        inner = np.delete(np.arange(tfirst[-1]), np.r_[tfirst[:-1], tfirst[1:] - 1])
+        times[inner] = profiles.breaks[m] + tau
+        times[tfirst[1:] - 1] = profiles.total
+        broken: dict[int, PlanningError] = {}
+        towner = np.repeat(np.arange(count), wcount)
+        for i in np.flatnonzero((np.diff(times) <= 0) & (towner[1:] == towner[:-1])):
+            r = int(seqs[towner[i]])
+            if r not in broken:
+                block = int(i - tfirst[towner[i]])
+                broken[r] = PlanningError(f"block {block} got a non-positive duration (numerical failure)", block)
+        return (times, tfirst), broken
+
+    def _verify(self, profiles: _Profiles, times: tuple[np.ndarray, np.ndarray], good: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Worst excess over the limits at samples of the time laws of the good sequences.
+
+        Returns, for the samples that exceed a limit: their path parameter s, the factor on the
+        squared speed cap, the factor on the acceleration bound, their sequence, and their
+        (velocity, acceleration, jerk) ratios (n, 3).
+        """
+        batch, pieces = self.batch, profiles.pieces
+        times, tfirst = times
+        pk = pieces.owner
+        h = np.diff(profiles.breaks)[np.delete(np.arange(len(profiles.breaks) - 1), profiles.bfirst[1:-1] - 1)]
+        fill_dt = max(self.widest / 8.0, 1e-3) if batch.jerk else 5e-3
+        # A piece lies within one grid interval, where the path and the cubic s(t) are smooth: a
+        # bounded number of samples resolves it however long it lasts (a very slow feed gives
+        # pieces of hours, which at fill_dt would not fit in memory).
+        chosen = np.flatnonzero(good[pk])
+        gaps = np.clip(np.ceil(h[chosen] / fill_dt), 2, _MAX_PIECE_SAMPLES).astype(int)
+        piece = np.repeat(chosen, gaps)
+        step = np.arange(int(gaps.sum())) - np.repeat(np.cumsum(gaps) - gaps, gaps)
+        t = pieces.start[piece] + h[piece] * step / np.repeat(gaps, gaps)
+        ends_t = pieces.start[chosen] + h[chosen] * (1.0 - 1e-9)
+        towner = np.repeat(np.arange(len(profiles.seqs)), np.diff(tfirst))
+        interior = np.flatnonzero((towner[1:] == towner[:-1]) & good[towner[1:]])
+        interior = interior[np.isin(interior + 1, tfirst[1:] - 1, invert=True)]  # waypoints 1 .. K - 1
+        dt = np.diff(times)
+        around_t = np.concatenate([times[interior + 1] - 1e-7 * dt[interior],
+                                   times[interior + 1] + 1e-7 * dt[interior + 1]])
+        around_k = np.concatenate([towner[interior + 1]] * 2)
+        final_k = np.flatnonzero(good)
+        t = np.concatenate([t, ends_t, around_t, profiles.total[final_k]])
+        piece = np.concatenate([piece, chosen, pieces.locate(around_k, around_t), pieces.first[final_k + 1] - 1])
+        found = [self._excess(profiles, piece[c], t[c]) for c in np.array_split(
+            np.arange(len(t)), max(1, -(-len(t) // _VERIFY_CHUNK)))]
+        return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))  # type: ignore[return-value]
+
+    def _excess(self, profiles: _Profiles, piece: np.ndarray, t: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """_verify's findings at samples t, each in its profile piece (see there)."""
+        batch, pieces, lim = self.batch, profiles.pieces, self.batch.limits
+        k = pieces.owner[piece]
+        t = np.clip(t, 0.0, profiles.total[k])
+        s, sd, sdd, sddd = pieces.derivatives(piece, t, (0, 1, 2, 3))
+        s = np.clip(s, 0.0, 1.0)
+        r = profiles.seqs[k]
+        blk = batch.path.locate(r, s, "right")
+        q1, q2, q3 = batch.path.derivatives(blk, s, (1, 2, 3))  # (5, n)
+        v, a, j = lim.velocity[:, None], lim.acceleration[:, None], lim.jerk[:, None]
+        r_vel = np.max(np.abs(q1) / v, axis=0) * sd
+        r_vel = np.maximum(r_vel, sd / batch.block_cap[blk])
+        r_vel = np.maximum(r_vel, np.linalg.norm(batch.tip(blk, s, 1), axis=0) * sd / batch.tip_feed[blk])
+        # Acceleration and jerk split into the tangential part (from the path acceleration and
+        # jerk: lowered through the acceleration bound) and the rest (from the path's curvature:
+        # lowered through the speed).
+        acc_c = q2 * sd ** 2
+        r_acc = np.max(np.abs(q1 * sdd + acc_c) / a, axis=0)
+        share_acc = np.max(np.abs(acc_c) / a, axis=0) / np.maximum(r_acc, 1e-300)
+        if batch.jerk:
+            jerk_c = 3.0 * q2 * (sd * sdd) + q3 * sd ** 3
+            r_jerk = np.max(np.abs(q1 * sddd + jerk_c) / j, axis=0)
+            share_jerk = np.max(np.abs(jerk_c) / j, axis=0) / np.maximum(r_jerk, 1e-300)
+        else:
+            r_jerk = share_jerk = np.zeros_like(r_acc)
+        bad = (r_vel > 1 + _VERIFY_TOL) | (r_acc > 1 + _VERIFY_TOL) | (r_jerk > 1 + _VERIFY_TOL)
+        r_vel, r_acc, r_jerk = (np.maximum(ratio[bad], 1.0) for ratio in (r_vel, r_acc, r_jerk))
+        curv_acc = share_acc[bad] > 0.5
+        curv_jerk = share_jerk[bad] > 0.5
+        fx = np.minimum(r_vel ** -2.0, np.where(curv_acc, r_acc ** -1.0, 1.0))
+        fx = np.minimum(fx, np.where(curv_jerk, r_jerk ** (-2.0 / 3.0), 1.0))
+        fa = np.minimum(np.where(curv_acc, 1.0, r_acc ** -1.0), np.where(curv_jerk, 1.0, r_jerk ** -1.0))
+        fx = np.where(fx < 1.0, fx * _SHRINK, 1.0)
+        fa = np.where(fa < 1.0, fa * _SHRINK, 1.0)
+        return s[bad], fx, fa, r[bad], np.stack([r_vel, r_acc, r_jerk], axis=1)
+
+    def _feed_plan(self, r: int, profiles: _Profiles, k: int, times: tuple[np.ndarray, np.ndarray],
+                   attempt: int) -> FeedPlan:
+        batch = self.batch
+        block_times = times[0][times[1][k]:times[1][k + 1]].copy()
+        b0, b1 = profiles.bfirst[k], profiles.bfirst[k + 1]
+        profile = PPoly.construct_fast(np.ascontiguousarray(profiles.coef[:, b0 - k:b1 - k - 1]),
+                                       profiles.breaks[b0:b1].copy(), extrapolate=True)
+        w = slice(batch.wfirst[r], batch.wfirst[r + 1])
+        blocks = batch.path.coef[..., batch.bfirst[r]:batch.bfirst[r + 1]]
+        path = PPoly.construct_fast(np.ascontiguousarray(blocks.transpose(0, 2, 1)),
+                                    batch.s[w].copy(), extrapolate=True)
+        return FeedPlan(np.diff(block_times), block_times, batch.s[w].copy(), path, profile, float(self.w[r]),
+                        int(self.grid.first[r + 1] - self.grid.first[r]), attempt)
