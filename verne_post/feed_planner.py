@@ -74,7 +74,9 @@ logger = logging.getLogger(__name__)
 _ACC_MARGIN = 0.97  # share of the acceleration limits given to TOPP2 (the filter mixes neighbours)
 _JERK_CAP_MARGIN = 0.7  # share of the jerk limits for the centripetal-jerk velocity cap
 _FIR_FACTOR = 1.25  # widest filter: w = factor * max_j(a_j / J_j), where full acceleration is used
-_ERODE = 0.5  # a cap holds over _ERODE * w * (its own speed) of travel on either side of its point
+# A cap holds over erode * w * (its own speed) of travel on either side of its point: tight first,
+# then, for the sequences whose tight plan cannot be brought within the limits, the safe reach.
+_ERODE = (0.1, 0.5)
 _GRID_PER_WINDOW = 4  # target grid intervals per filter width, at the capped speed
 _MIN_INTERVALS = 32
 _MAX_INTERVALS_PER_BLOCK = 1.0  # grid intervals per block, on average at most (plus a constant)
@@ -190,11 +192,15 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
         results[r] = error
     valid = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
     if len(valid):
-        rows = _ranges(first[valid], first[valid + 1])
-        blocks = _ranges(first[valid] - valid, first[valid + 1] - valid - 1)
-        batch = _Batch.of(joints[rows], tip[rows], feed[blocks], np.r_[0, np.cumsum(np.diff(first)[valid])], limits,
-                          angular_feed, min_duration, jerk)
-        for r, plan in zip(valid, _Planner(batch, engine, max_refinements).plan(), strict=True):
+        chosen = _select(joints, tip, feed, first, valid)
+        plans = _Planner(_Batch.of(*chosen, limits, angular_feed, min_duration, jerk), engine, max_refinements,
+                         _ERODE[0]).plan()
+        again = np.array([k for k, plan in enumerate(plans) if isinstance(plan, PlanningError)], dtype=int)
+        if len(again):
+            retry = _Batch.of(*_select(*chosen, again), limits, angular_feed, min_duration, jerk)
+            for k, plan in zip(again, _Planner(retry, engine, max_refinements, _ERODE[1]).plan(), strict=True):
+                plans[k] = plan
+        for r, plan in zip(valid, plans, strict=True):
             results[r] = plan
     return results  # type: ignore[return-value]
 
@@ -264,10 +270,20 @@ class _Pieces:
         """Derivatives of the given orders (0..3) at local positions x, each in its ``piece``."""
         assert self.coef is not None
         tau = x - self.start[piece]
-        c3, c2, c1, c0 = self.coef[..., piece]
-        out = {0: lambda: ((c3 * tau + c2) * tau + c1) * tau + c0, 1: lambda: (3.0 * c3 * tau + 2.0 * c2) * tau + c1,
-               2: lambda: 6.0 * c3 * tau + 2.0 * c2, 3: lambda: 6.0 * c3 + 0.0 * tau}
-        return [out[order]() for order in orders]
+        c = self.coef[: 4 - min(orders), ..., piece]  # c0 is gathered only where the value is wanted
+        out = []
+        for order in orders:
+            weights = _DERIVATIVE_WEIGHTS[order]
+            value = weights[0] * c[0]
+            for k, weight in enumerate(weights[1:], start=1):
+                value *= tau
+                value += c[k] if weight == 1.0 else weight * c[k]
+            out.append(value)
+        return out
+
+
+#: d^n/dx^n of c3 x^3 + c2 x^2 + c1 x + c0 as Horner weights on (c3, c2, ...).
+_DERIVATIVE_WEIGHTS = {0: (1.0, 1.0, 1.0, 1.0), 1: (3.0, 2.0, 1.0), 2: (6.0, 2.0), 3: (6.0,)}
 
 
 def _not_a_knot(x: np.ndarray, y: np.ndarray, first: np.ndarray) -> np.ndarray:
@@ -402,6 +418,14 @@ def _concatenate(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
     return q, tip, feed, first
 
 
+def _select(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, first: np.ndarray, which: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sequences ``which`` of concatenated (joints, tip, feed) with waypoint offsets ``first``."""
+    rows = _ranges(first[which], first[which + 1])
+    blocks = _ranges(first[which] - which, first[which + 1] - which - 1)
+    return joints[rows], tip[rows], feed[blocks], np.r_[0, np.cumsum(np.diff(first)[which])]
+
+
 def _refusals(joints: np.ndarray, first: np.ndarray, limits: Limits, max_turn: float) -> dict[int, PlanningError]:
     """Sequences that cannot be planned at all: a block without joint motion, a sharp corner."""
     bfirst = first - np.arange(len(first))
@@ -529,7 +553,7 @@ class _Planner:
     """All the sequences of a batch: grid and caps once, then TOPP2, filter and verification in
     rounds, each round over the sequences not yet within every limit."""
 
-    def __init__(self, batch: _Batch, engine: Engine, max_refinements: int) -> None:
+    def __init__(self, batch: _Batch, engine: Engine, max_refinements: int, erode: float) -> None:
         self.batch, self.engine, self.solve, self.max_refinements = batch, engine, solver(engine), max_refinements
         lim = batch.limits
         count = batch.count
@@ -588,17 +612,17 @@ class _Planner:
         checks = _Pieces(check, cfirst, np.ones(count))
         raw = batch.point_cap(cseq, check)
         # With the filter, the speed at a point mixes the speeds within half a filter width of
-        # travel around it: each check point imposes its cap over _ERODE * w * (its own capped
+        # travel around it: each check point imposes its cap over erode * w * (its own capped
         # speed) on either side, and a gridpoint takes the lowest cap reaching its two grid
         # intervals (the squared speed is linear in s between gridpoints).
-        reach = _ERODE * self.w[cseq] * np.sqrt(raw)
+        reach = erode * self.w[cseq] * np.sqrt(raw)
         lo = self.grid.clip(cseq, self.grid.search(cseq, check - reach, "left") - 1)
         hi = self.grid.clip(cseq, self.grid.search(cseq, check + reach, "right"))
         self.xcap = _range_chmin(n, lo, hi, raw)
         index = np.arange(n)
         lo0 = grid[np.maximum(index - 1, gfirst[gseq])]
         hi0 = grid[np.minimum(index + 1, gfirst[gseq + 1] - 1)]
-        r = _ERODE * self.w[gseq] * np.sqrt(self.xcap)
+        r = erode * self.w[gseq] * np.sqrt(self.xcap)
         self.radius = np.maximum(r, np.maximum(grid - lo0, hi0 - grid))
         # Path acceleration bound: the filter spreads a path acceleration over its window, where
         # |q_j'| may be larger than at the gridpoint; |sddot| <= a_j / max over the window |q_j'|,
@@ -629,8 +653,13 @@ class _Planner:
         worst: dict[int, tuple[float, float, float, float]] = {}
         for attempt in range(self.max_refinements + 1):
             solved = []
+            xmax = np.minimum(base, cap)
+            together = self._topp_together(active, xmax, acc_scale)
+            if together is not None:
+                x[_ranges(self.grid.first[active], self.grid.first[active + 1])] = together
+                solved, active = list(active), active[:0]
             for r in active:
-                outcome = self._topp(int(r), np.minimum(base, cap), acc_scale)
+                outcome = self._topp(int(r), xmax, acc_scale)
                 if isinstance(outcome, PlanningError):
                     results[r] = outcome
                 else:
@@ -681,6 +710,40 @@ class _Planner:
         assert all(result is not None for result in results)
         return results  # type: ignore[return-value]
 
+    def _scaled(self, rows: np.ndarray, t0: np.ndarray, xmax: np.ndarray, acc_scale: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+        """The TOPP2 problem at gridpoints ``rows`` in the time scale t0 (per gridpoint, s): caps,
+        path acceleration bound, and the joint acceleration rows divided by their limits."""
+        inverse = 1.0 / (acc_scale[rows, None] * self.batch.limits.acceleration[None, :] * t0[:, None] ** 2)
+        umax = acc_scale[rows] * self.umax[rows] * t0 ** 2 if self.batch.jerk else None
+        return np.maximum(xmax[rows], 0.0) * t0 ** 2, umax, self.q1[rows] * inverse, self.q2[rows] * inverse
+
+    def _topp_together(self, seqs: np.ndarray, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | None:
+        """The squared path speeds of all the sequences ``seqs`` from one copp-py call, or None.
+
+        The sequences are laid end to end along one parameter (sequence k on [2k, 2k + 1]), each
+        in its own time scale, held at rest at both of its ends: the problems stay independent
+        and one call saves the per-call cost of many small ones. None (engine other than copp,
+        or any failure): plan them one by one.
+        """
+        if self.engine != "copp" or len(seqs) < 2:
+            return None
+        grid = self.grid
+        rows = _ranges(grid.first[seqs], grid.first[seqs + 1])
+        counts = grid.first[seqs + 1] - grid.first[seqs]
+        k = np.repeat(np.arange(len(seqs)), counts)
+        t0 = self.t_scale[seqs][k]
+        cap, umax, q1, q2 = self._scaled(rows, t0, xmax, acc_scale)
+        ends = np.r_[0, np.cumsum(counts)]
+        cap[ends[:-1]] = cap[ends[1:] - 1] = 0.0
+        try:
+            x = self.solve(2.0 * k + grid.start[rows], cap, umax, q1, q2) / t0 ** 2
+        except ToppError as error:
+            logger.debug("copp-py on %d sequences at once failed (%s): one by one", len(seqs), error)
+            return None
+        x[ends[:-1]] = x[ends[1:] - 1] = 0.0
+        return x
+
     def _topp(self, r: int, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | PlanningError:
         """Squared path speeds (1/s^2) at the gridpoints of sequence r, time-optimal under xmax
         and the accelerations.
@@ -689,16 +752,12 @@ class _Planner:
         another time scale, with the acceleration limits 0.1 to 2 % lower (stricter, never looser).
         """
         g = slice(self.grid.first[r], self.grid.first[r + 1])
-        lim = self.batch.limits
+        rows = np.arange(g.start, g.stop)
         failure = None
         for tighten, rescale in _RETRIES:
-            t0 = self.t_scale[r] * rescale
-            scale = acc_scale[g] * tighten
-            inverse = 1.0 / (scale[:, None] * lim.acceleration[None, :] * t0 ** 2)
-            umax = scale * self.umax[g] * t0 ** 2 if self.batch.jerk else None
+            t0 = np.full(len(rows), self.t_scale[r] * rescale)
             try:
-                x = self.solve(self.grid.start[g], np.maximum(xmax[g], 0.0) * t0 ** 2, umax, self.q1[g] * inverse,
-                               self.q2[g] * inverse) / t0 ** 2
+                x = self.solve(self.grid.start[g], *self._scaled(rows, t0, xmax, acc_scale * tighten)) / t0 ** 2
             except ToppError as error:
                 failure = error
                 logger.debug("%s failed (accelerations x %s, time scale x %s): %s", self.engine, tighten, rescale,
