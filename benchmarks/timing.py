@@ -1,6 +1,6 @@
 """Time-parametrisation on the generated 5-axis job: speed of planning and quality of the plan.
 
-    python benchmarks/timing.py [--points 100000] [--short 10000]
+    python -m benchmarks.timing [--points 100000] [--short 10000]
 
 For each job prints, in one run: planning time (CL points/s and blocks/s), the planned feed
 time T, the lower bound LB = sum over blocks of length / min(F, min_j v_j / |dq_j/ds|) (no
