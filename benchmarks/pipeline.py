@@ -1,32 +1,33 @@
-"""The main job's speed, stage by stage, side by side with LinuxCNC's interpreter reading the result.
+"""The whole command on the main job, timed as a process, against LinuxCNC's interpreter reading its output.
 
-    python benchmarks/pipeline.py [--points 100000]
+    python -m benchmarks.pipeline [--points 100000] [--runs 3]
 
-Generates the 5-axis example at the given size (examples/generate_job.py), runs every stage of
-``verne-post part.cls -o part.nc`` before time-parametrisation (``--no-timing``; the planner
-has its own benchmark, benchmarks/timing.py), and in the same run times
-``rs274`` interpreting the program it wrote. Target: verne-post no slower than the interpreter.
+Generates the 5-axis example at the given size (examples/generate_job.py; 100,000 points make
+about 105,000 blocks) and times, as separate processes, each the median of ``--runs`` runs taken
+in turn (A B C A B C ..., so a drift of the machine's speed hits all three alike):
+
+  (a) ``verne-post job.cls -o job.nc -q``: every stage, planning and verification included;
+  (b) the same with ``--report job.json``;
+  (c) LinuxCNC's ``rs274 -g`` alone reading the job.nc that (a) wrote, as verne_post.rs274 runs it.
+
+Prints their seconds and the ratios (a)/(c) (target <= 4) and (b)/(a) (target <= 1.10), the
+planning speed in blocks/s (the report's ``seconds.timing``), and the report's stage timings.
 """
 
 from __future__ import annotations
 
-import os
+import argparse
+import importlib.util
+import json
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import argparse  # noqa: E402
-import importlib.util  # noqa: E402
-import re  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import verne_post as vp  # noqa: E402
-from verne_post.gcode import write_program  # noqa: E402
-from verne_post.pipeline import PostOptions, gcode_format, postprocess  # noqa: E402
-from verne_post.rs274 import run_rs274  # noqa: E402
+from verne_post.rs274 import INSTALL_HINT, _environment, _write_tool_table, find_rs274
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -39,36 +40,61 @@ def _generator():
     return module
 
 
+def _seconds(command: list[str], folder: Path, env: dict[str, str]) -> float:
+    """Wall time (s) of one run of ``command`` in ``folder``, which must succeed."""
+    start = time.perf_counter()
+    process = subprocess.run(command, cwd=folder, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True, check=False)
+    elapsed = time.perf_counter() - start
+    if process.returncode != 0:
+        raise SystemExit(f"{command[0]} failed ({process.returncode}): {process.stderr.strip()[-500:]}")
+    return elapsed
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--points", type=int, default=100_000)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, default=100_000, help="CL points of the generated job")
+    parser.add_argument("--runs", type=int, default=3, help="runs of each command (the median is printed)")
     args = parser.parse_args()
-    machine = vp.load_machine()
-    with tempfile.TemporaryDirectory() as folder:
-        source, output = Path(folder) / "job.cls", Path(folder) / "job.nc"
-        source.write_text(_generator().generate(args.points))
-        start = time.perf_counter()
-        result = postprocess(source, machine, PostOptions(plan=False))  # timing: benchmarks/timing.py
-        assert not result.violations, result.violations[:3]
-        write_start = time.perf_counter()
-        write_program(result.program, gcode_format(machine), output)
-        write_time = time.perf_counter() - write_start
-        total = time.perf_counter() - start
-        tools = [int(t) for t in re.findall(r"^T(\d+) M6", output.read_text(), re.M)]
-        start = time.perf_counter()
-        interpreted = run_rs274(output, tool_numbers=tools, timeout=600)
-        rs274_time = time.perf_counter() - start
-    points, blocks = len(result.poses), len(result.program.joints)
-    stages = {**result.seconds, "write": write_time}
-    print(f"job: {points:,} CL points -> {blocks:,} blocks ({blocks - points:,} inserted), "
-          f"{len(interpreted.moves):,} moves read back by rs274")
-    print(f"\n{'stage':<12}{'seconds':>10}{'CL points/s':>14}")
-    for name, seconds in stages.items():
-        print(f"{name:<12}{seconds:>10.3f}{points / seconds:>14,.0f}")
-    print(f"{'verne-post':<12}{total:>10.3f}{points / total:>14,.0f}   (all stages above)")
-    print(f"{'rs274':<12}{rs274_time:>10.3f}{points / rs274_time:>14,.0f}   (LinuxCNC reading the program, "
-          f"incl. parsing its canon output)")
-    print(f"\nratio verne-post / rs274 = {total / rs274_time:.2f}  (target <= 1)")
+    rs274 = find_rs274()
+    if rs274 is None:
+        raise SystemExit(INSTALL_HINT)
+    post = [sys.executable, "-m", "verne_post"]  # the verne-post command of this interpreter
+    env = _environment(rs274)
+    with tempfile.TemporaryDirectory() as name:
+        folder = Path(name)
+        (folder / "job.cls").write_text(_generator().generate(args.points))
+        commands = {
+            "a": [*post, "job.cls", "-o", "job.nc", "-q"],
+            "b": [*post, "job.cls", "-o", "job_report.nc", "-q", "--report", "job.json"],
+            "c": [rs274, "-g", "-t", "tools.tbl", "job.nc", "canon.txt"],
+        }
+        times: dict[str, list[float]] = {key: [] for key in commands}
+        for run in range(args.runs):
+            for key, command in commands.items():
+                if key == "c" and run == 0:  # the tool table of the program (a) has just written
+                    tools = re.findall(r"^(?:N\d+ )?T(\d+) M6", (folder / "job.nc").read_text(), re.M)
+                    _write_tool_table(folder / "tools.tbl", map(int, tools))
+                times[key].append(_seconds(command, folder, env))
+        if "PROGRAM_END" not in (folder / "canon.txt").read_text()[-2000:]:
+            raise SystemExit("rs274 did not read job.nc to its end")
+        report = json.loads((folder / "job.json").read_text())
+    median = {key: statistics.median(values) for key, values in times.items()}
+    blocks, points = report["points"]["blocks"], report["points"]["cl"]
+    stages = report["seconds"]
+    print(f"job: {points:,} CL points -> {blocks:,} blocks; median of {args.runs} runs each, whole processes\n")
+    rows = [("(a) verne-post -o job.nc -q", "a"), ("(b) ... --report job.json", "b"), ("(c) rs274 -g job.nc", "c")]
+    for label, key in rows:
+        spread = ", ".join(f"{t:.2f}" for t in times[key])
+        print(f"{label:<30}{median[key]:>8.2f} s   {points / median[key]:>9,.0f} CL points/s   (runs: {spread})")
+    print(f"\n(a) / (c) = {median['a'] / median['c']:.2f}  (target <= 4)")
+    print(f"(b) / (a) = {median['b'] / median['a']:.3f}  (target <= 1.10)")
+    print(f"planning: {stages['timing']:.2f} s, {blocks / stages['timing']:,.0f} blocks/s (run (b)'s report)")
+    print(f"\n{'stage (b)':<30}{'seconds':>8}")
+    for stage, seconds in stages.items():
+        print(f"{stage:<30}{seconds:>8.2f}")
+    rest = times["b"][-1] - sum(stages.values())
+    print(f"{'rest':<30}{rest:>8.2f}   (start-up, report, writing, verification: that run's wall time minus the above)")
 
 
 if __name__ == "__main__":

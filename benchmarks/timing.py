@@ -1,13 +1,15 @@
 """Time-parametrisation on the generated 5-axis job: speed of planning and quality of the plan.
 
-    python benchmarks/timing.py [--points 100000] [--short 10000]
+    python -m benchmarks.timing [--points 100000] [--short 10000]
 
 For each job prints, in one run: planning time (CL points/s and blocks/s), the planned feed
 time T, the lower bound LB = sum over blocks of length / min(F, min_j v_j / |dq_j/ds|) (no
 acceleration limit at all), the time of a look-ahead trapezoidal-feed baseline with per-block
-joint velocity clamping and no jerk limit (how common CNC controllers plan), and T / LB,
-T / baseline; and the same plan without jerk limits (T0, the baseline's own assumptions).
-Rapids are the same ruckig moves in all three and are left out.
+joint velocity clamping and no jerk limit (how common CNC controllers plan), the time of a
+jerk-limited look-ahead baseline with per-block S-curves (benchmarks/scurve.py, how controllers
+with S-curve planning run G-code; the issue's target is T below it), and T / LB, T / baseline,
+T / S-curve baseline; and the same plan without jerk limits (T0, the trapezoid's own
+assumptions). Rapids are the same ruckig moves in all of them and are left out.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np  # noqa: E402
 
 import verne_post as vp  # noqa: E402
 from benchmarks.pipeline import _generator  # noqa: E402
+from benchmarks.scurve import scurve_baseline_time  # noqa: E402
 from verne_post.pipeline import PostOptions, feed_speed, postprocess  # noqa: E402
 from verne_post.schedule import plan_program  # noqa: E402
 from verne_post.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
@@ -41,7 +44,7 @@ def measure(points: int) -> None:
     rotary = np.radians(machine.timing.rotary_feed) / 60.0
     blocks, schedule = result.blocks, result.schedule
     speed = feed_speed(result.poses, blocks, result.duration)
-    planned = bound = baseline = 0.0
+    planned = bound = baseline = scurve = 0.0
     sequences = 0
     for segment in schedule.segments:
         if segment.rapid:
@@ -51,6 +54,7 @@ def measure(points: int) -> None:
         planned += segment.plan.total
         bound += lower_bound_time(*args, angular_feed=rotary)
         baseline += baseline_time(*args, angular_feed=rotary)
+        scurve += scurve_baseline_time(*args, angular_feed=rotary)
         sequences += 1
     seconds = result.seconds["timing"]
     without_jerk = plan_program(blocks.joints, blocks.tip, result.rapid, speed, result.poses.sequence[blocks.pose],
@@ -63,6 +67,8 @@ def measure(points: int) -> None:
     print(f"  planned feed time T  {planned:8.1f} s")
     print(f"  lower bound LB       {bound:8.1f} s   T / LB       = {planned / bound:.3f}  (target <= 1.25)")
     print(f"  trapezoidal baseline {baseline:8.1f} s   T / baseline = {planned / baseline:.3f}  (target <= 0.90)")
+    print(f"  S-curve baseline     {scurve:8.1f} s   T / S-curve  = {planned / scurve:.3f}  (target < 1; "
+          f"jerk-limited, per-block S-curves)")
     print(f"  without jerk limits  {planned_nj:8.1f} s   T0 / LB      = {planned_nj / bound:.3f}   "
           f"T0 / baseline = {planned_nj / baseline:.3f}  (same limits as the baseline)")
     print(f"  LB / baseline = {bound / baseline:.3f}: no plan can be faster than this share of the baseline")

@@ -44,6 +44,7 @@ def test_not_finite_is_rejected(tmp_path: Path, option: str, value: str) -> None
     ("--tol", "1e-300"), ("--arc-tol", "1e-12"), ("--period", "1e-9"),  # no end of subdivision or samples
     ("--tol", "1e6"), ("--axis-tol", "720"), ("--period", "1e9"), ("--tool-length", "1e12"),
     ("--max-messages", "1e3"), ("--max-messages", "9" * 30), ("--tol", "abc"), ("--tol", "0x10"),
+    ("--decimals", "3"), ("--decimals", "13"), ("--decimals", "9.5"), ("--decimals", "nan"), ("--decimals", "-9"),
 ])
 def test_negative_and_absurd_values_are_rejected(tmp_path: Path, option: str, value: str) -> None:
     _rejected(*_run(tmp_path, "-o", str(tmp_path / "p.nc"), option, value), option)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -12,8 +13,12 @@ from click.testing import CliRunner
 import verne_post as vp
 from tests.test_pipeline import CASES, EXAMPLES
 from verne_post.cl import read_toolpath
-from verne_post.cli import main
+from verne_post.cli import MIN_PERIOD, main
+from verne_post.errors import InputError
 from verne_post.pipeline import PostOptions, postprocess
+from verne_post.schedule import Schedule, Segment
+from verne_post.timing import RapidPlan
+from verne_post.trajectory import MAX_DECIMALS, default_decimals, write_timed_csv
 
 NAMES = ("rho1", "rho2", "rho3", "theta1", "theta2")
 # The impeller runs for 20 minutes: sampled at 5 ms (its jerk filter spans ~60 ms), the rest at 1 ms.
@@ -84,3 +89,64 @@ def test_block_ends_and_inverse_time_feeds_follow_the_plan(tmp_path: Path, name:
     planned_feed_time = sum(s.plan.total for s in schedule.segments if not s.rapid)
     assert np.sum(60.0 / f_words) == pytest.approx(planned_feed_time, rel=1e-3)
     assert f"CYCLE TIME {schedule.total:.1f} S" in gcode
+
+
+def _rounding(decimals: int, h: float) -> float:
+    """The most rounding to ``decimals`` adds to a jerk estimate |x3 - 3 x2 + 3 x1 - x0| / h^3:
+    each of the four values moves by at most half a unit of its last decimal."""
+    return (1 + 3 + 3 + 1) * 0.5 * 10.0**-decimals / h**3
+
+
+def _jerk_estimates(path: Path, h: float) -> np.ndarray:
+    """Third differences of the position columns / h^3 (mm/s^3, deg/s^3), signed, (N - 3, 5)."""
+    q = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(1, 6))
+    return np.diff(q, 3, axis=0) / h**3
+
+
+def test_jerk_can_be_checked_from_the_timed_csv_alone(tmp_path: Path) -> None:
+    # For a C2 motion (every feed sequence and rapid starts and ends at rest with no acceleration)
+    # the third divided difference is a weighted mean of the jerk over the three periods (its
+    # Peano kernel is a B-spline: positive, unit integral), so it never exceeds the largest jerk:
+    # the allowance is the limit (with the 2 % the other checks of this file give the plan) plus
+    # what rounding the printed positions can add, nothing for the finite difference itself.
+    _, _, jerk = _limits(vp.load_machine())
+    h, name = 0.001, "nx_swarf_inch_crlf.cls"  # rides the theta2 jerk limit; has rapids
+    fine = _run(tmp_path, name, (0.0, 0.0, 0.0), ".csv", "--period", str(h))
+    decimals = len(fine.read_text().split("\n", 2)[1].split(",")[1].partition(".")[2])
+    assert decimals >= 9
+    assert _rounding(decimals, h) <= 1e-3 * jerk.min()  # resolves a tenth of a percent of every limit
+    estimate = _jerk_estimates(fine, h)
+    assert np.all(np.abs(estimate) <= 1.02 * jerk + _rounding(decimals, h))
+    # With 6 decimals the same check is impossible: rounding can add 4,000 deg/s^3, more than the
+    # 2 % tolerance of the rotary limits, and in this file it does; the plan, within its limits,
+    # would fail the check.
+    coarse = _run(tmp_path, name, (0.0, 0.0, 0.0), "_6.csv", "--period", str(h), "--decimals", "6")
+    coarse_estimate = _jerk_estimates(coarse, h)
+    assert coarse_estimate.shape == estimate.shape
+    assert np.all(_rounding(6, h) > 0.02 * jerk[3:])
+    assert np.any(np.abs(coarse_estimate - estimate).max(axis=0) > 0.02 * jerk)
+    assert np.any(np.abs(coarse_estimate) > 1.02 * jerk)
+
+
+@pytest.mark.parametrize("period", [MIN_PERIOD, 2e-4, 3.3e-4, 5e-4, 7e-4, 1e-3, 5e-3, 0.0])
+def test_default_decimals_keep_the_rounding_of_jerk_estimates_small(period: float) -> None:
+    decimals = default_decimals(period)
+    assert 9 <= decimals <= MAX_DECIMALS
+    if period > 0:  # enough, and not one more than needed (or 9)
+        assert _rounding(decimals, period) <= 4.0 * (1 + 1e-9)
+        assert decimals == 9 or _rounding(decimals - 1, period) > 4.0
+
+
+def test_a_value_too_large_for_its_decimals_is_an_error_and_no_file(tmp_path: Path) -> None:
+    machine = vp.load_machine()
+    # A rotary table turned continuously through 10^7 degrees: 10^19 at 12 decimals overflows the
+    # 64-bit integers the numbers are formatted through; 9 decimals fit.
+    joints = np.array([600.0, 600.0, 600.0, 0.0, math.radians(1e7)])
+    schedule = Schedule(np.zeros(2), (Segment(1, 1, True, RapidPlan(joints, joints.copy(), 0.0, None), 0.0),))
+    args = (machine, schedule, np.zeros(2), np.array([5, 7]), 0.0)
+    with pytest.raises(InputError, match="fewer --decimals"):
+        write_timed_csv(tmp_path / "big.csv", *args, decimals=MAX_DECIMALS)
+    assert not (tmp_path / "big.csv").exists()
+    write_timed_csv(tmp_path / "big.csv", *args, decimals=9)
+    row = (tmp_path / "big.csv").read_text().splitlines()[1].split(",")
+    assert float(row[5]) == pytest.approx(1e7, abs=1e-6)

@@ -60,13 +60,15 @@ _HASH_LINE = re.compile(r"^(?:N\d+ )?\(BATCH HASH ([0-9a-f]{64})\)\s*$")
 @dataclass(frozen=True)
 class BatchOptions:
     """The pipeline's choices (None: the defaults) and what is written: G-code (verified unless
-    ``verify`` is False) or the timed CSV at ``period`` s."""
+    ``verify`` is False) or the timed CSV at ``period`` s, t and positions with ``decimals``
+    (None: enough for third differences at the period)."""
 
     post: PostOptions = None  # type: ignore[assignment]  # made PostOptions() at once
     output_format: Literal["gcode", "csv"] = "gcode"
     period: float = 0.001
     verify: bool = True
     report: bool = False  # also return the JSON report of each file (PostResult.report)
+    decimals: int | None = None
 
     def __post_init__(self) -> None:
         if self.post is None:  # the pipeline (and its planner) is imported only where posting happens
@@ -83,7 +85,8 @@ class BatchOptions:
         whether a report is made), keys sorted: the same choices give the same text."""
         post = asdict(self.post)
         del post["workers"]  # the planner gives the same plan with any number of processes
-        shaping = {"post": post, "output_format": self.output_format, "period": self.period, "verify": self.verify}
+        shaping = {"post": post, "output_format": self.output_format, "period": self.period,
+                   "decimals": self.decimals, "verify": self.verify}
         return json.dumps(shaping, sort_keys=True, separators=(",", ":"))
 
 
@@ -221,7 +224,7 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
                 return outcome("violations", f"{name}:{first.line}: {first.message}{count}", report=report)
             target = Path(folder) / ("out" + options.suffix)
             verification = write_output(result, loaded, post, target, options.output_format, options.period,
-                                        verify=options.verify)
+                                        verify=options.verify, decimals=options.decimals)
             if verification is not None and not verification.ok:
                 finding = verification.findings[0]
                 figures["line"] = finding.cl_line

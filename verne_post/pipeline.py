@@ -321,17 +321,18 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
 
 
 def write_output(result: PostResult, machine: Machine, options: PostOptions, path: str | os.PathLike[str],
-                 output_format: Literal["gcode", "csv"] = "gcode", period: float = 0.001, verify: bool = True
-                 ) -> Verification | None:
+                 output_format: Literal["gcode", "csv"] = "gcode", period: float = 0.001, verify: bool = True,
+                 decimals: int | None = None) -> Verification | None:
     """Write the program of ``result`` to ``path`` (atomically): G-code as :func:`write_gcode` does,
-    or the timed joint trajectory as CSV, a row every ``period`` s (0: one per block end)."""
+    or the timed joint trajectory as CSV, a row every ``period`` s (0: one per block end), t and
+    positions with ``decimals`` (default: enough for third differences at the period)."""
     if output_format == "gcode":
         return write_gcode(result, machine, options, path, verify=verify)
     from .trajectory import write_timed_csv
 
     blocks = result.blocks
     write_timed_csv(path, machine, result.schedule, result.poses.tool_length[blocks.pose],
-                    result.poses.line[blocks.pose], period)
+                    result.poses.line[blocks.pose], period, decimals)
     return None
 
 
