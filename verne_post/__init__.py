@@ -8,7 +8,7 @@ Library entry points (mm, radians inside arrays; table frame for tool poses)::
     results = verne_post.batch(["parts/"], None, verne_post.BatchOptions(), output_dir="posted")
 """
 
-__version__ = "0.1.0"  # before the imports: modules below read it
+__version__ = "0.2.0"  # before the imports: modules below read it
 
 from .api import (
     FKResult,
