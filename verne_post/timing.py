@@ -244,7 +244,11 @@ def plan_rapid(start: np.ndarray, end: np.ndarray, limits: Limits) -> RapidPlan:
     inp.max_jerk = limits.jerk.tolist()
     inp.synchronization = Synchronization.Phase
     trajectory = Trajectory(DOF)
-    result = Ruckig(DOF).calculate(inp, trajectory)
+    try:
+        result = Ruckig(DOF).calculate(inp, trajectory)
+    except ValueError as error:  # an error code the binding has no name for (-101: duration too long)
+        raise PlanningError(f"ruckig could not plan the rapid from {start.tolist()} to {end.tolist()}: {error}"
+                            ) from error
     if result not in (Result.Working, Result.Finished):
         raise PlanningError(f"ruckig could not plan the rapid from {start.tolist()} to {end.tolist()}: {result}")
     return RapidPlan(start, end, float(trajectory.duration), trajectory)
