@@ -408,8 +408,8 @@ def test_rapid_of_zero_length(limits: Limits) -> None:
 
 
 def test_rapid_beyond_ruckigs_duration_limit_is_a_planning_error(limits: Limits) -> None:
-    """ruckig refuses trajectories longer than its duration limit (1e7 s is far beyond any rapid,
-    but a corrupt 10^7 degree turn of the table asks for it): a planning error, not a crash."""
+    """ruckig refuses trajectories longer than its duration limit (a corrupt turn of the table by
+    millions of degrees asks for one): a planning error, not a crash."""
     start = np.array([600.0, 600.0, 600.0, 0.0, 0.0])
     with pytest.raises(PlanningError, match="ruckig could not plan the rapid"):
         plan_rapid(start, start + np.array([0.0, 0.0, 0.0, 0.0, 1.7e5]), limits)
