@@ -107,6 +107,10 @@ class FeedPlan:
     filter_width: float  # s, width of the jerk filter (0 without jerk limiting)
     gridpoints: int  # TOPP2 gridpoints used
     refinements: int  # local cap reductions needed to meet every limit
+    # (3, 5): largest |velocity|, |acceleration|, |jerk| of each joint over its limit, found by
+    # the planner's verification of this exact time law (at every piece and both sides of
+    # every waypoint); the certified figures the report shows
+    peak_ratios: np.ndarray
 
     @property
     def total(self) -> float:
@@ -674,10 +678,11 @@ class _Planner:
             for r, error in broken.items():
                 results[r] = error
             good = ~np.isin(profiles.seqs, list(broken))
-            where, fx, fa, seq, ratios = self._verify(profiles, times, good)
+            where, fx, fa, seq, ratios, peaks = self._verify(profiles, times, good)
             failing = np.unique(seq)
             for k in np.flatnonzero(good & ~np.isin(profiles.seqs, failing)):
-                results[profiles.seqs[k]] = self._feed_plan(int(profiles.seqs[k]), profiles, int(k), times, attempt)
+                results[profiles.seqs[k]] = self._feed_plan(int(profiles.seqs[k]), profiles, int(k), times, attempt,
+                                                            peaks[k])
             if not len(failing):
                 break
             for r in failing:
@@ -904,12 +909,13 @@ class _Planner:
         return (times, tfirst), broken
 
     def _verify(self, profiles: _Profiles, times: tuple[np.ndarray, np.ndarray], good: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Worst excess over the limits at samples of the time laws of the good sequences.
 
         Returns, for the samples that exceed a limit: their path parameter s, the factor on the
         squared speed cap, the factor on the acceleration bound, their sequence, and their
-        (velocity, acceleration, jerk) ratios (n, 3).
+        (velocity, acceleration, jerk) ratios (n, 3); and per profile the largest |velocity|,
+        |acceleration|, |jerk| of each joint over its limit at the samples (S, 3, 5).
         """
         batch, pieces = self.batch, profiles.pieces
         times, tfirst = times
@@ -935,13 +941,21 @@ class _Planner:
         final_k = np.flatnonzero(good)
         t = np.concatenate([t, ends_t, around_t, profiles.total[final_k]])
         piece = np.concatenate([piece, chosen, pieces.locate(around_k, around_t), pieces.first[final_k + 1] - 1])
-        found = [self._excess(profiles, piece[c], t[c]) for c in np.array_split(
-            np.arange(len(t)), max(1, -(-len(t) // _VERIFY_CHUNK)))]
-        return tuple(np.concatenate(parts) for parts in zip(*found, strict=True))  # type: ignore[return-value]
+        order = np.argsort(pieces.owner[piece], kind="stable")  # by profile, for the peaks per profile
+        piece, t = piece[order], t[order]
+        peaks = np.zeros((len(profiles.seqs), 3 * DOF))
+        found = []
+        for chunk in np.array_split(np.arange(len(t)), max(1, -(-len(t) // _VERIFY_CHUNK))):
+            *excess, (k, peak) = self._excess(profiles, piece[chunk], t[chunk])
+            np.maximum.at(peaks, k, peak)
+            found.append(excess)
+        bad = tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
+        return (*bad, peaks.reshape(-1, 3, DOF))  # type: ignore[return-value]
 
     def _excess(self, profiles: _Profiles, piece: np.ndarray, t: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """_verify's findings at samples t, each in its profile piece (see there)."""
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """_verify's findings at samples t, each in its profile piece, sorted by profile (see
+        there); the peaks as (profiles present, their (3 * 5) peaks)."""
         batch, pieces, lim = self.batch, profiles.pieces, self.batch.limits
         k = pieces.owner[piece]
         t = np.clip(t, 0.0, profiles.total[k])
@@ -951,21 +965,27 @@ class _Planner:
         blk = batch.path.locate(r, s, "right")
         q1, q2, q3 = batch.path.derivatives(blk, s, (1, 2, 3))  # (5, n)
         v, a, j = lim.velocity[:, None], lim.acceleration[:, None], lim.jerk[:, None]
-        r_vel = np.max(np.abs(q1) / v, axis=0) * sd
+        joint_vel = np.abs(q1) / v * sd
+        r_vel = np.max(joint_vel, axis=0)
         r_vel = np.maximum(r_vel, sd / batch.block_cap[blk])
         r_vel = np.maximum(r_vel, np.linalg.norm(batch.tip(blk, s, 1), axis=0) * sd / batch.tip_feed[blk])
         # Acceleration and jerk split into the tangential part (from the path acceleration and
         # jerk: lowered through the acceleration bound) and the rest (from the path's curvature:
         # lowered through the speed).
         acc_c = q2 * sd ** 2
-        r_acc = np.max(np.abs(q1 * sdd + acc_c) / a, axis=0)
+        joint_acc = np.abs(q1 * sdd + acc_c) / a
+        r_acc = np.max(joint_acc, axis=0)
         share_acc = np.max(np.abs(acc_c) / a, axis=0) / np.maximum(r_acc, 1e-300)
         if batch.jerk:
             jerk_c = 3.0 * q2 * (sd * sdd) + q3 * sd ** 3
-            r_jerk = np.max(np.abs(q1 * sddd + jerk_c) / j, axis=0)
+            joint_jerk = np.abs(q1 * sddd + jerk_c) / j
+            r_jerk = np.max(joint_jerk, axis=0)
             share_jerk = np.max(np.abs(jerk_c) / j, axis=0) / np.maximum(r_jerk, 1e-300)
         else:
+            joint_jerk = np.zeros_like(joint_acc)
             r_jerk = share_jerk = np.zeros_like(r_acc)
+        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+        peaks = (k[starts], np.maximum.reduceat(np.vstack([joint_vel, joint_acc, joint_jerk]), starts, axis=1).T)
         bad = (r_vel > 1 + _VERIFY_TOL) | (r_acc > 1 + _VERIFY_TOL) | (r_jerk > 1 + _VERIFY_TOL)
         r_vel, r_acc, r_jerk = (np.maximum(ratio[bad], 1.0) for ratio in (r_vel, r_acc, r_jerk))
         curv_acc = share_acc[bad] > 0.5
@@ -975,10 +995,10 @@ class _Planner:
         fa = np.minimum(np.where(curv_acc, 1.0, r_acc ** -1.0), np.where(curv_jerk, 1.0, r_jerk ** -1.0))
         fx = np.where(fx < 1.0, fx * _SHRINK, 1.0)
         fa = np.where(fa < 1.0, fa * _SHRINK, 1.0)
-        return s[bad], fx, fa, r[bad], np.stack([r_vel, r_acc, r_jerk], axis=1)
+        return s[bad], fx, fa, r[bad], np.stack([r_vel, r_acc, r_jerk], axis=1), peaks
 
     def _feed_plan(self, r: int, profiles: _Profiles, k: int, times: tuple[np.ndarray, np.ndarray],
-                   attempt: int) -> FeedPlan:
+                   attempt: int, peaks: np.ndarray) -> FeedPlan:
         batch = self.batch
         block_times = times[0][times[1][k]:times[1][k + 1]].copy()
         b0, b1 = profiles.bfirst[k], profiles.bfirst[k + 1]
@@ -989,4 +1009,4 @@ class _Planner:
         path = PPoly.construct_fast(np.ascontiguousarray(blocks.transpose(0, 2, 1)),
                                     batch.s[w].copy(), extrapolate=True)
         return FeedPlan(np.diff(block_times), block_times, batch.s[w].copy(), path, profile, float(self.w[r]),
-                        int(self.grid.first[r + 1] - self.grid.first[r]), attempt)
+                        int(self.grid.first[r + 1] - self.grid.first[r]), attempt, peaks)

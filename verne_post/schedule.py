@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .feed_planner import FeedPlan, plan_feeds
-from .timing import Limits, PlanningError, RapidPlan, lower_bound_time, plan_rapid
+from .timing import Limits, PlanningError, RapidPlan, block_min_time, plan_rapid
 from .topp import Engine
 
 
@@ -129,38 +129,30 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     return Schedule(duration, tuple(Segment(a, b, r, p, float(start[a])) for a, b, r, p in planned))
 
 
-#: Samples per piece of a feed's time law, per rapid, and per evaluation in limit_ratios.
-_PIECE_SAMPLES, _RAPID_SAMPLES, _CHUNK = 64, 20_000, 200_000
+#: Samples per rapid in limit_ratios, at most.
+_RAPID_SAMPLES = 20_000
 
 
 def limit_ratios(schedule: Schedule, limits: Limits, period: float = 0.002) -> np.ndarray:
-    """Largest |velocity|, |acceleration|, |jerk| over their limits, (3, 5) per joint, sampled
-    every ``period`` s (jerk of rapids by differences of their acceleration).
+    """Largest |velocity|, |acceleration|, |jerk| over their limits, (3, 5) per joint.
 
-    The samples are bounded whatever the durations (a very slow feed lasts hours): a feed's time
-    law is sampled at the ends of its pieces and at most 64 times within each (where it is one
-    cubic), a rapid at most 20,000 times.
+    Feed moves: the figures the planner certified (its verification of each exact time law at
+    every piece and on both sides of every waypoint). Rapids: sampled every ``period`` s (at
+    most 20,000 times), the jerk by differences of the acceleration.
     """
     worst = np.zeros((3, 5))
     for segment in schedule.segments:
         plan = segment.plan
         if isinstance(plan, FeedPlan):
-            ends = np.clip(plan.profile.x, 0.0, plan.total)
-            h = np.diff(ends)
-            count = np.clip(np.ceil(h / period), 1, _PIECE_SAMPLES).astype(int)
-            owner = np.repeat(np.arange(len(h)), count)
-            step = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
-            t = np.r_[ends[:-1][owner] + h[owner] * step / count[owner], plan.total]
-            rates = (plan.sample_all(chunk)[1:] for chunk in np.array_split(t, -(-len(t) // _CHUNK)))
-        else:
-            t = np.linspace(0.0, plan.total, int(np.clip(np.ceil(plan.total / period) + 1, 2, _RAPID_SAMPLES)))
-            _, qd, qdd = plan.sample(t)
-            rates = iter([(qd, qdd, np.diff(qdd, axis=0) / max(t[1] - t[0], 1e-12))])
-        for chunk in rates:
-            for k, (values, limit) in enumerate(zip(chunk, (limits.velocity, limits.acceleration, limits.jerk),
-                                                    strict=True)):
-                if len(values):
-                    worst[k] = np.maximum(worst[k], np.max(np.abs(values), axis=0) / limit)
+            worst = np.maximum(worst, plan.peak_ratios)
+            continue
+        t = np.linspace(0.0, plan.total, int(np.clip(np.ceil(plan.total / period) + 1, 2, _RAPID_SAMPLES)))
+        _, qd, qdd = plan.sample(t)
+        jerk = np.diff(qdd, axis=0) / max(t[1] - t[0], 1e-12)
+        for k, (values, limit) in enumerate(zip((qd, qdd, jerk), (limits.velocity, limits.acceleration, limits.jerk),
+                                                strict=True)):
+            if len(values):
+                worst[k] = np.maximum(worst[k], np.max(np.abs(values), axis=0) / limit)
     return worst
 
 
@@ -168,15 +160,12 @@ def time_budget(schedule: Schedule, joints: np.ndarray, tip: np.ndarray, feed: n
                 rotary_feed: float) -> dict[str, float]:
     """Feed time split into: at the programmed feed, lost to joint velocity limits (the bound
     of ``timing.lower_bound_time`` over the feed alone), lost to acceleration and jerk (s)."""
-    at_feed = lower = planned = 0.0
+    moves = [s for s in schedule.segments if not s.rapid]
+    rows = np.concatenate([np.arange(s.first, s.last + 1) for s in moves]) if moves else np.zeros(0, int)
     huge = Limits(limits.velocity * 1e9, limits.acceleration, limits.jerk)
-    for segment in schedule.segments:
-        if segment.rapid:
-            continue
-        rows = np.arange(segment.first - 1, segment.last + 1)
-        args = (joints[rows], tip[rows], feed[segment.first:segment.last + 1])
-        at_feed += lower_bound_time(*args, huge, angular_feed=rotary_feed)
-        lower += lower_bound_time(*args, limits, angular_feed=rotary_feed)
-        planned += segment.plan.total
+    dq, dtip = joints[rows] - joints[rows - 1], tip[rows] - tip[rows - 1]
+    at_feed, lower = (float(np.sum(block_min_time(dq, dtip, feed[rows], lim, angular_feed=rotary_feed)))
+                      for lim in (huge, limits))
+    planned = float(sum(s.plan.total for s in moves))
     return {"feed_time_s": planned, "at_programmed_feed_s": at_feed, "lost_to_joint_velocity_s": lower - at_feed,
             "lost_to_acceleration_and_jerk_s": planned - lower}

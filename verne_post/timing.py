@@ -23,7 +23,7 @@ from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
 
 from .errors import CheckError
 
-__all__ = ["Limits", "PlanningError", "RapidPlan", "baseline_time", "lower_bound_time", "plan_rapid"]
+__all__ = ["Limits", "PlanningError", "RapidPlan", "baseline_time", "block_min_time", "lower_bound_time", "plan_rapid"]
 
 DOF = 5
 TIP_EPS = 1e-4
@@ -107,8 +107,11 @@ class _Blocks:
 
 
 def _blocks(joints: np.ndarray, tip: np.ndarray) -> _Blocks:
-    dq = np.diff(joints, axis=0)
-    length = np.linalg.norm(np.diff(tip, axis=0), axis=1)
+    return _moves(np.diff(joints, axis=0), np.diff(tip, axis=0))
+
+
+def _moves(dq: np.ndarray, dtip: np.ndarray) -> _Blocks:
+    length = np.linalg.norm(dtip, axis=1)
     return _Blocks(dq, length, length < TIP_EPS, np.linalg.norm(dq[:, 3:], axis=1))
 
 
@@ -119,6 +122,15 @@ def _block_min_time(blocks: _Blocks, feed: np.ndarray, limits: Limits, angular_f
     if angular_feed is not None:
         t_feed = np.where(blocks.rotary_only, blocks.rotary / angular_feed, t_feed)
     return np.maximum(t_joint, t_feed)
+
+
+def block_min_time(dq: np.ndarray, dtip: np.ndarray, feed: np.ndarray, limits: Limits, *,
+                   angular_feed: float | None = None) -> np.ndarray:
+    """Per block, the time (s) at the highest speed allowed along its chord, no acceleration
+    limit: dq (K, 5) joint displacements (mm, rad), dtip (K, 3) tool tip displacements (mm,
+    relative to the part), feed (K,) mm/s; ``angular_feed`` (rad/s) as in :func:`lower_bound_time`."""
+    return _block_min_time(_moves(np.asarray(dq, dtype=float), np.asarray(dtip, dtype=float)),
+                           np.asarray(feed, dtype=float), _check_limits(limits), angular_feed)
 
 
 def lower_bound_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits, *,
