@@ -137,7 +137,10 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         lengths = poses.tool_length[k]
         ends = (all_joints[left], all_joints[right], all_tip[left], all_tip[right], all_axis[left], all_axis[right])
         tip_error, axis_error = deviation(machine, *ends, lengths, MIDDLE, (all_alpha[left], all_alpha[right]))
-        near = (tip_error > QUARTERS_FROM * MARGIN * tol) | (axis_error > QUARTERS_FROM * MARGIN * axis_tol)
+        # Quarters only where the middle alone does not already split the block: they could
+        # only raise an error that is over the limit anyway.
+        near = (((tip_error > QUARTERS_FROM * MARGIN * tol) | (axis_error > QUARTERS_FROM * MARGIN * axis_tol))
+                & (tip_error <= MARGIN * tol) & (axis_error <= MARGIN * axis_tol))
         if near.any():
             more = deviation(machine, *(e[near] for e in ends), lengths[near], QUARTERS,
                              (all_alpha[left][near], all_alpha[right][near]))
