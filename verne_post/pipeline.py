@@ -24,13 +24,15 @@ from .gcode import GcodeFormat, Program, program_text, with_header_line, write_p
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
-from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
-from .timing import Limits
 from .toolpath import Dwell, ToolChange
 from .verify import Reference, Verification, verify_program
 
 if TYPE_CHECKING:
     from .placement import Placement
+    from .schedule import Schedule
+
+# The planner (verne_post.schedule, verne_post.timing) is imported where it is used: with
+# toppra it takes about a second to load, which 'place' (check_poses only) does not need.
 
 
 @dataclass(frozen=True)
@@ -108,6 +110,9 @@ class PostResult:
     def _timing(self, machine: Machine) -> dict[str, Any] | None:
         if self.schedule is None:
             return None
+        from .schedule import limit_ratios, time_budget
+        from .timing import Limits
+
         limits = Limits.from_machine(machine)
         tools = self.poses.tool[self.blocks.pose]
         ratios = limit_ratios(self.schedule, limits)
@@ -138,6 +143,8 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
     share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
     rotary-only block is never of zero duration. Rapids: the joint-limit time.
     """
+    from .timing import Limits
+
     step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
     joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
     length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
@@ -241,6 +248,9 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     duration = block_durations(machine, poses, blocks, rapid)
     schedule = None
     if not violations and options.plan:
+        from .schedule import SequenceError, plan_program
+        from .timing import Limits
+
         try:
             schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
                                     poses.sequence[blocks.pose], Limits.from_machine(machine),
