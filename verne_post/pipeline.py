@@ -182,13 +182,16 @@ class Checked:
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None) -> Checked:
+                lap: Callable[[str], None] = lambda stage: None, first_failure: bool = False) -> Checked:
     """IK and branch, linearisation and every check of table-frame poses (no timing); violations
-    sorted by line. Placement calls this for each candidate work offset."""
+    sorted by line. Placement calls this for each candidate work offset. With ``first_failure``
+    the linearisation stops once a block end fails: the violations then show that the program
+    fails, not every way it does (placement's room only asks whether it runs)."""
     cone = np.radians(machine.pole.cone)
     solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
     lap("ik")
-    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
+    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone,
+                       until_failure=first_failure)
     lap("linearise")
     rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
