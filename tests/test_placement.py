@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -72,8 +73,6 @@ def test_found_offset_is_a_local_optimum_of_the_whole_program(placed: dict) -> N
     zero = machine_poses(read_toolpath(REAL), machine, work_offset=(0, 0, 0), tool_length=float(TOOL))
 
     def smallest_headroom(offset: np.ndarray) -> float:
-        from dataclasses import replace
-
         blocks = check_poses(machine, replace(zero, tip=zero.tip + offset), options).blocks
         return float(np.min(smallest(headroom(machine, blocks.joints, blocks.result.margins))[0]))
 
@@ -106,6 +105,37 @@ def test_work_offset_auto_is_recorded_in_the_gcode_header(tmp_path: Path, placed
     assert np.allclose([x, y, z], placed["work_offset_mm"], atol=1e-3)  # deterministic: the same as 'place'
     assert "WORK OFFSET CHOSEN BY VERNE-POST PLACE" in text
     assert re.search(r"PART MAY MOVE BY X -[\d.]+/\+[\d.]+ Y -[\d.]+/\+[\d.]+ Z -[\d.]+/\+[\d.]+ MM", text)
+
+
+def test_first_failure_gives_the_verdict_of_the_full_checks() -> None:
+    """check_poses(first_failure=True), which placement's room uses, against the complete check
+    at offsets across two edges of the NX example's feasible region: the same verdict; block
+    ends that are the complete linearisation's own; everything the same where the program runs."""
+    machine = vp.load_machine()
+    zero = machine_poses(read_toolpath(EXAMPLES / "nx_variable_axis_inch.cls"), machine, work_offset=(0, 0, 0))
+    options = PostOptions(plan=False)
+    centre = np.array([-4.9, -3.5, -150.7])  # the program runs here (asserted below)
+    offsets = [centre] + [centre + t * np.array(d) for d, span in (((-1, 0, 0), range(362, 387, 3)),
+                                                                   ((0, 1, 0), range(372, 391, 3))) for t in span]
+    seen = set()
+    for k, offset in enumerate(offsets):
+        shifted = replace(zero, tip=zero.tip + offset)
+        full = check_poses(machine, shifted, options)
+        quick = check_poses(machine, shifted, options, first_failure=True)
+        assert bool(quick.violations) == bool(full.violations)
+        ends = {(int(p), float(f)): q for p, f, q in zip(full.blocks.pose, full.blocks.fraction, full.blocks.joints,
+                                                            strict=True)}
+        for p, f, q in zip(quick.blocks.pose, quick.blocks.fraction, quick.blocks.joints, strict=True):
+            assert np.array_equal(ends[(int(p), float(f))], q, equal_nan=True)
+        if not full.violations:
+            assert quick.violations == full.violations and np.array_equal(quick.blocks.pose, full.blocks.pose)
+            seen.add("runs")
+        elif len(quick.blocks.pose) == len(zero):
+            seen.add("stopped at the CL poses")
+        elif len(quick.blocks.pose) < len(full.blocks.pose):
+            seen.add("stopped at an inserted pose")
+        assert k > 0 or not full.violations
+    assert seen == {"runs", "stopped at the CL poses", "stopped at an inserted pose"}
 
 
 def _cl(tmp_path: Path, name: str, operations: list[tuple[int, float, list[tuple[float, ...]]]]) -> Path:

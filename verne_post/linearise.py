@@ -111,10 +111,15 @@ def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray
     return tip_error, axis_error
 
 
-def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float, axis_tol: float, cone: float
-              ) -> Blocks:
+def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float, axis_tol: float, cone: float,
+              until_failure: bool = False) -> Blocks:
     """Insert poses into feed moves until the joint interpolation is within ``tol`` (mm) and
-    ``axis_tol`` (rad) of the CL path. Rapids and moves across a tool change are left alone."""
+    ``axis_tol`` (rad) of the CL path. Rapids and moves across a tool change are left alone.
+
+    With ``until_failure`` it stops as soon as the program is known to fail: a cut needs both
+    angle pairs or a block end (CL pose or inserted) is not ok. Every block end it returns is
+    one of the complete linearisation's, so the failing one is among them.
+    """
     n = len(poses)
     result = path.result
     tip, axis = [poses.tip], [path.axis]
@@ -126,8 +131,9 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     left, right = np.flatnonzero(movable) - 1, np.flatnonzero(movable)
     unresolved: list[np.ndarray] = []
     size = n
+    failing = until_failure and bool(path.pair_switch.any() or np.any(result.status != Status.OK))
     for level in range(MAX_LEVELS + 1):
-        if left.size == 0:
+        if left.size == 0 or failing:
             break
         all_tip, all_axis = np.concatenate(tip), np.concatenate(axis)
         all_joints = np.concatenate([r.joints for r in results])
@@ -137,7 +143,10 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         lengths = poses.tool_length[k]
         ends = (all_joints[left], all_joints[right], all_tip[left], all_tip[right], all_axis[left], all_axis[right])
         tip_error, axis_error = deviation(machine, *ends, lengths, MIDDLE, (all_alpha[left], all_alpha[right]))
-        near = (tip_error > QUARTERS_FROM * MARGIN * tol) | (axis_error > QUARTERS_FROM * MARGIN * axis_tol)
+        # Quarters only where the middle alone does not already split the block: they could
+        # only raise an error that is over the limit anyway.
+        near = (((tip_error > QUARTERS_FROM * MARGIN * tol) | (axis_error > QUARTERS_FROM * MARGIN * axis_tol))
+                & (tip_error <= MARGIN * tol) & (axis_error <= MARGIN * axis_tol))
         if near.any():
             more = deviation(machine, *(e[near] for e in ends), lengths[near], QUARTERS,
                              (all_alpha[left][near], all_alpha[right][near]))
@@ -158,6 +167,7 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         mid_axis = slerp(path.axis[k - 1], path.axis[k], u)
         theta2 = 0.5 * (all_joints[left, 4] + all_joints[right, 4])
         mid, realised = solve_with_theta2(machine, mid_tip, mid_axis, lengths, theta2, cone)
+        failing = until_failure and bool(np.any(mid.status != Status.OK))
         bad = mid.status == Status.UNREACHABLE
         unresolved.append(k[bad])
         new = np.arange(size, size + len(u))

@@ -24,14 +24,16 @@ from .gcode import GcodeFormat, Program, program_text, with_header_line, write_p
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
-from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
-from .timing import Limits
 from .toolpath import Dwell, ToolChange
 from .topp import Engine
 from .verify import Reference, Verification, verify_program
 
 if TYPE_CHECKING:
     from .placement import Placement
+    from .schedule import Schedule
+
+# The planner (verne_post.schedule, verne_post.timing) is imported where it is used: with
+# toppra it takes about a second to load, which 'place' (check_poses only) does not need.
 
 
 @dataclass(frozen=True)
@@ -110,6 +112,9 @@ class PostResult:
     def _timing(self, machine: Machine) -> dict[str, Any] | None:
         if self.schedule is None:
             return None
+        from .schedule import limit_ratios, time_budget
+        from .timing import Limits
+
         limits = Limits.from_machine(machine)
         tools = self.poses.tool[self.blocks.pose]
         ratios = limit_ratios(self.schedule, limits)
@@ -140,6 +145,8 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
     share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
     rotary-only block is never of zero duration. Rapids: the joint-limit time.
     """
+    from .timing import Limits
+
     step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
     joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
     length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
@@ -177,13 +184,16 @@ class Checked:
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None) -> Checked:
+                lap: Callable[[str], None] = lambda stage: None, first_failure: bool = False) -> Checked:
     """IK and branch, linearisation and every check of table-frame poses (no timing); violations
-    sorted by line. Placement calls this for each candidate work offset."""
+    sorted by line. Placement calls this for each candidate work offset. With ``first_failure``
+    the linearisation stops once a block end fails: the violations then show that the program
+    fails, not every way it does (placement's room only asks whether it runs)."""
     cone = np.radians(machine.pole.cone)
     solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
     lap("ik")
-    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
+    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone,
+                       until_failure=first_failure)
     lap("linearise")
     rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
@@ -243,6 +253,9 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     duration = block_durations(machine, poses, blocks, rapid)
     schedule = None
     if not violations and options.plan:
+        from .schedule import SequenceError, plan_program
+        from .timing import Limits
+
         try:
             schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
                                     poses.sequence[blocks.pose], Limits.from_machine(machine),

@@ -6,14 +6,16 @@ maximises the program's smallest *headroom* (see :mod:`verne_post.headroom`: eve
 singularity margin as a comparable fraction, 0 at the limit):
 
 1. Screen (fast, vectorised): a few hundred CL poses (the extreme ones in 26 directions, per
-   tool, plus an even spread) through the working-mode kernel, both tool-axis angle pairs,
-   at a coarse grid of offsets over the machine's reach, then a pattern search (26 neighbours,
-   step halving) from the best grid points.
+   tool, plus an even spread) through the working-mode kernel, the better of both tool-axis
+   angle pairs, at a coarse grid of offsets over the machine's reach; then a pattern search
+   (26 neighbours, step halving) from the best grid points, with the angle pairs the branch
+   stage chooses at the best one (the better pair is not always the one the program takes).
 2. Verify: the whole program at the best offset through the checks of ``check`` (IK and branch
    choice, linearisation, every check along the motion). Poses that come out worse than the
    screen knew are added to the screened set and the search resumes (at most a few rounds).
 3. Room: along -x, +x, -y, +y, -z, +z, how far the part may move and still run (bisection on
-   the screened poses, each end confirmed by the full checks): the setter's clamping tolerance.
+   the screened poses, each end confirmed by the full checks, which stop at the first failure
+   they find): the setter's clamping tolerance.
 
 Everything is deterministic (fixed grids, no random numbers). mm and the table frame
 throughout; the headroom is a fraction.
@@ -29,8 +31,9 @@ from typing import Any
 import numpy as np
 
 from .api import Status, classify, joint_bounds, pose_margins
+from .branch import solve_path
 from .checks import motion_samples
-from .headroom import describe, headroom, smallest
+from .headroom import UNREACHABLE, describe, headroom, smallest
 from .kinematics import machine_ik_working, margins, module_ik_working
 from .machine import Machine
 from .pipeline import Checked, PostOptions, check_poses
@@ -107,6 +110,14 @@ class _Points:
         k = np.isin(self.pose, rows)
         return _Points(*(getattr(self, name)[k] for name in _Points.__dataclass_fields__))
 
+    def paired(self, machine: Machine, poses: MachinePoses, offset: np.ndarray) -> _Points:
+        """The CL poses (``self`` holds them all, one point each) with the angle pairs the branch
+        stage chooses at ``offset`` (mm): the screen then takes the pairs the program will."""
+        solved = solve_path(machine, poses.tip + offset, poses.axis, poses.sequence, tool_length=poses.tool_length,
+                            cone=np.radians(machine.pole.cone))
+        pair = np.where(solved.in_cone, 1, solved.result.pair).astype(int)
+        return replace(self, theta2=np.nan_to_num(solved.result.joints[:, 4]), pair=pair)
+
     def chosen(self, checked: Checked, offset: np.ndarray) -> _Points:
         """The block ends of a full check at ``offset`` (every CL pose has one) and the branch
         stage's choices there; ``self`` must hold every CL pose."""
@@ -147,6 +158,24 @@ def _spread(poses: MachinePoses, machine: Machine, size: int) -> np.ndarray:
     return np.unique(np.concatenate(picked))
 
 
+def _smallest_headroom(machine: Machine, tip: np.ndarray, axis: np.ndarray, length: np.ndarray, pair: np.ndarray,
+                       theta2: np.ndarray, exact: bool) -> np.ndarray:
+    """(N,) smallest headroom of tool poses (tips mm, table frame; tool lengths mm) with angle
+    pairs ``pair`` (+1, -1); on the pole theta2 (rad), turned by pi for pair -1."""
+    values = np.full((len(tip), 9), np.nan)
+    at_pole = np.where(pair > 0, theta2, theta2 + np.pi)
+    for value in np.unique(length):
+        rows = np.flatnonzero(length == value)
+        geom = machine.kinematic_geometry(float(value))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ik = machine_ik_working(geom, tip[rows], axis[rows], pair=pair[rows], theta2_at_pole=at_pole[rows],
+                                    exact_fallback=exact)
+            ok = ik.reachable
+            values[rows[ok]] = headroom(machine, ik.joints[ok], margins(geom, ik.joints[ok], ik.platform[ok],
+                                                                        ik.alpha[ok]))
+    return smallest(values)[0]
+
+
 def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exact: bool = False) -> np.ndarray:
     """(K, S) smallest headroom of each screened pose at each offset (K, 3).
 
@@ -159,32 +188,27 @@ def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exa
     axis = np.broadcast_to(screen.axis, (k, s, 3)).reshape(-1, 3)
     length = np.tile(screen.length, k)
     theta2 = np.tile(screen.theta2, k)
-    found = {}
-    for pair in (1, -1):
-        at_pole = theta2 + (0.0 if pair > 0 else np.pi)
-        values = np.full((k * s, 9), np.nan)
-        for value in np.unique(length):
-            rows = np.flatnonzero(length == value)
-            geom = machine.kinematic_geometry(float(value))
-            with np.errstate(invalid="ignore", divide="ignore"):
-                ik = machine_ik_working(geom, tip[rows], axis[rows], pair=pair, theta2_at_pole=at_pole[rows],
-                                        exact_fallback=exact)
-                ok = ik.reachable
-                values[rows[ok]] = headroom(machine, ik.joints[ok],
-                                            margins(geom, ik.joints[ok], ik.platform[ok], ik.alpha[ok]))
-        found[pair] = smallest(values)[0].reshape(k, s)
+
+    def found(pair: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        return _smallest_headroom(machine, tip[rows], axis[rows], length[rows], pair, theta2[rows], exact)
+
     if not np.any(screen.pair):
-        return np.maximum(found[1], found[-1])
+        return np.maximum(found(np.ones(k * s)), found(-np.ones(k * s))).reshape(k, s)
     # One pair per run: the chosen one while it runs throughout, else the other; neither: the
     # run fails (the branch stage would switch pairs mid-cut). In the cone there is no choice.
     starts = np.flatnonzero(np.r_[True, screen.run[1:] != screen.run[:-1]])
     counts = np.diff(np.r_[starts, s])
-    preferred = np.where(screen.pair > 0, found[1], found[-1])
-    other = np.where(screen.pair > 0, found[-1], found[1])
+    chosen = np.tile(screen.pair, k)
+    preferred = found(chosen).reshape(k, s)
     preferred_runs = np.repeat(np.minimum.reduceat(preferred, starts, axis=1), counts, axis=1) >= 0
+    # The other pair only matters in the runs off the pole where the chosen one fails.
+    other = np.full(k * s, UNREACHABLE)
+    rows = np.flatnonzero(~preferred_runs & ~screen.in_cone)
+    other[rows] = found(-chosen[rows], rows)
+    other = other.reshape(k, s)
     other_runs = np.repeat(np.minimum.reduceat(other, starts, axis=1), counts, axis=1) >= 0
-    chosen = np.where(preferred_runs | screen.in_cone | ~other_runs, preferred, other)
-    return np.where(preferred_runs | other_runs | screen.in_cone, chosen, np.minimum(chosen, -1e-9))
+    best = np.where(preferred_runs | screen.in_cone | ~other_runs, preferred, other)
+    return np.where(preferred_runs | other_runs | screen.in_cone, best, np.minimum(best, -1e-9))
 
 
 def _score(room: np.ndarray) -> np.ndarray:
@@ -271,7 +295,20 @@ def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: 
     """The full checks of the program (poses at work offset 0) at ``offset`` (mm), with the
     smallest headroom over block ends and motion samples and the poses to screen next."""
     shifted = replace(poses, tip=poses.tip + offset)
-    checked = check_poses(machine, shifted, options)
+    return _verdict(machine, poses, shifted, check_poses(machine, shifted, options))
+
+
+def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> np.ndarray | None:
+    """The room's full check at ``offset`` (mm): None where the program runs, else the CL poses
+    to screen next. It stops at the first failure (see :func:`verne_post.pipeline.check_poses`)."""
+    shifted = replace(poses, tip=poses.tip + offset)
+    checked = check_poses(machine, shifted, options, first_failure=True)
+    return _verdict(machine, poses, shifted, checked).worst if checked.violations else None
+
+
+def _verdict(machine: Machine, poses: MachinePoses, shifted: MachinePoses, checked: Checked) -> _Verdict:
+    """A full check's smallest headroom and the poses to screen next; ``shifted``: the poses
+    checked, ``poses`` the same at work offset 0."""
     blocks = checked.blocks
     lengths = shifted.tool_length[blocks.pose]
     along = motion_samples(machine, blocks.result, checked.rapid, lengths, shifted.line[blocks.pose])
@@ -318,17 +355,17 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
         tick()
         failed = []
         for k, d in enumerate(pending):
-            verdict = _verify(machine, poses, offset + lo[k] * directions[d], options)
+            worst = _confirm(machine, poses, offset + lo[k] * directions[d], options)
             tick()
-            if verdict.runs:
+            if worst is None:
                 inside[d] = lo[k]
                 continue
             outside[d] = lo[k]
-            grown = np.union1d(rows, verdict.worst)
+            grown = np.union1d(rows, worst)
             if len(grown) == len(rows):  # nothing new to screen: bisect with the full checks
                 while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
                     middle = (inside[d] + outside[d]) / 2.0
-                    if _verify(machine, poses, offset + middle * directions[d], options).runs:
+                    if _confirm(machine, poses, offset + middle * directions[d], options) is None:
                         inside[d] = middle
                     else:
                         outside[d] = middle
@@ -375,6 +412,7 @@ def _search(machine: Machine, poses: MachinePoses, options: PostOptions, tick: C
     tick("coarse grid")
     step = float(np.max((upper - lower) / (counts - 1))) / 2.0
     starts = grid[np.argsort(-scores, kind="stable")[:2]]
+    points = points.paired(machine, poses, starts[0])
     best: tuple[np.ndarray, _Verdict, _Points, np.ndarray] | None = None
     for _ in range(ROUNDS):
         candidates, found, count = _pattern_search(machine, points.screen(coarse_rows), points.screen(rows), starts,
