@@ -274,7 +274,9 @@ class _Pieces:
         """Derivatives of the given orders (0..3) at local positions x, each in its ``piece``."""
         assert self.coef is not None
         tau = x - self.start[piece]
-        c = self.coef[: 4 - min(orders), ..., piece]  # c0 is gathered only where the value is wanted
+        # c0 is gathered only where the value is wanted; np.take keeps each row contiguous (fancy
+        # indexing on the last axis would not, and every reduction over joints would crawl).
+        c = np.take(self.coef[: 4 - min(orders)], piece, axis=-1)
         out = []
         for order in orders:
             weights = _DERIVATIVE_WEIGHTS[order]
@@ -930,7 +932,11 @@ class _Planner:
         piece = np.repeat(chosen, gaps)
         step = np.arange(int(gaps.sum())) - np.repeat(np.cumsum(gaps) - gaps, gaps)
         t = pieces.start[piece] + h[piece] * step / np.repeat(gaps, gaps)
-        ends_t = pieces.start[chosen] + h[chosen] * (1.0 - 1e-9)
+        # s(t) is C2: at a break only the path jerk sddd changes, so the first sample of a piece
+        # also carries the previous piece's sddd (the left side of the break), 6 c3 of that piece.
+        left = np.full(len(t), np.nan)
+        after = (step == 0) & (piece > pieces.first[pk[piece]])
+        left[after] = 6.0 * pieces.coef[0, piece[after] - 1]
         towner = np.repeat(np.arange(len(profiles.seqs)), np.diff(tfirst))
         interior = np.flatnonzero((towner[1:] == towner[:-1]) & good[towner[1:]])
         interior = interior[np.isin(interior + 1, tfirst[1:] - 1, invert=True)]  # waypoints 1 .. K - 1
@@ -938,24 +944,26 @@ class _Planner:
         around_t = np.concatenate([times[interior + 1] - 1e-7 * dt[interior],
                                    times[interior + 1] + 1e-7 * dt[interior + 1]])
         around_k = np.concatenate([towner[interior + 1]] * 2)
-        final_k = np.flatnonzero(good)
-        t = np.concatenate([t, ends_t, around_t, profiles.total[final_k]])
-        piece = np.concatenate([piece, chosen, pieces.locate(around_k, around_t), pieces.first[final_k + 1] - 1])
+        final_k = np.flatnonzero(good)  # the end of the last piece: the end of the motion
+        t = np.concatenate([t, around_t, profiles.total[final_k]])
+        piece = np.concatenate([piece, pieces.locate(around_k, around_t), pieces.first[final_k + 1] - 1])
+        left = np.concatenate([left, np.full(len(around_t) + len(final_k), np.nan)])
         order = np.argsort(pieces.owner[piece], kind="stable")  # by profile, for the peaks per profile
-        piece, t = piece[order], t[order]
+        piece, t, left = piece[order], t[order], left[order]
         peaks = np.zeros((len(profiles.seqs), 3 * DOF))
         found = []
         for chunk in np.array_split(np.arange(len(t)), max(1, -(-len(t) // _VERIFY_CHUNK))):
-            *excess, (k, peak) = self._excess(profiles, piece[chunk], t[chunk])
+            *excess, (k, peak) = self._excess(profiles, piece[chunk], t[chunk], left[chunk])
             np.maximum.at(peaks, k, peak)
             found.append(excess)
         bad = tuple(np.concatenate(parts) for parts in zip(*found, strict=True))
         return (*bad, peaks.reshape(-1, 3, DOF))  # type: ignore[return-value]
 
-    def _excess(self, profiles: _Profiles, piece: np.ndarray, t: np.ndarray
+    def _excess(self, profiles: _Profiles, piece: np.ndarray, t: np.ndarray, left: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """_verify's findings at samples t, each in its profile piece, sorted by profile (see
-        there); the peaks as (profiles present, their (3 * 5) peaks)."""
+        there); ``left`` the path jerk just before a sample at a break (NaN elsewhere). The
+        peaks as (profiles present, their (3 * 5) peaks)."""
         batch, pieces, lim = self.batch, profiles.pieces, self.batch.limits
         k = pieces.owner[piece]
         t = np.clip(t, 0.0, profiles.total[k])
@@ -979,6 +987,9 @@ class _Planner:
         if batch.jerk:
             jerk_c = 3.0 * q2 * (sd * sdd) + q3 * sd ** 3
             joint_jerk = np.abs(q1 * sddd + jerk_c) / j
+            at_break = np.flatnonzero(~np.isnan(left))
+            joint_jerk[:, at_break] = np.maximum(joint_jerk[:, at_break],
+                                                 np.abs(q1[:, at_break] * left[at_break] + jerk_c[:, at_break]) / j)
             r_jerk = np.max(joint_jerk, axis=0)
             share_jerk = np.max(np.abs(jerk_c) / j, axis=0) / np.maximum(r_jerk, 1e-300)
         else:

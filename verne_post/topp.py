@@ -56,20 +56,20 @@ def _copp(grid: np.ndarray, xmax: np.ndarray, umax: np.ndarray | None, q1: np.nd
           ) -> np.ndarray:
     import copp_py as copp
 
-    n, dof = q1.shape
-    constraints = copp.Constraints(dof, capacity=n)
+    n = len(grid)
+    if umax is not None:  # |u| <= umax as one more row beside the joints' (rows a * x + b * u)
+        q1 = np.column_stack([q1, 1.0 / umax])
+        q2 = np.column_stack([q2, np.zeros(n)])
+    rows = q1.shape[1]
+    # copp-py adds all the rows of a station in one call fast, more rows to a station slowly:
+    # so one call for the upper bounds, one for the lower.
+    constraints = copp.Constraints(rows, capacity=n)
     constraints.append_s(grid)
     # copp-py wants caps > 0; the ends are held at rest by the boundary values anyway.
     constraints.add_constraint_1st(np.maximum(xmax, 1e-300).reshape(n, 1), 0)
-    ones = np.ones((n, dof))
-    # Rows a * x + b * u <= max; with is_negative the same rows bound from below (max < 0).
+    ones = np.ones((n, rows))
     constraints.add_constraint_2nd(q2, q1, ones, 0)
     constraints.add_constraint_2nd(q2, q1, -ones, 0, is_negative=True)
-    if umax is not None:
-        zero = np.zeros((n, dof))
-        inverse = np.repeat((1.0 / umax)[:, None], dof, axis=1)
-        constraints.add_constraint_2nd(zero, inverse, ones, 0)
-        constraints.add_constraint_2nd(zero, inverse, -ones, 0, is_negative=True)
     try:
         problem = copp.solver.topp2_ra.Problem(constraints, (0, n - 1), (0.0, 0.0))
         x = np.asarray(copp.solver.topp2_ra.solve(problem), dtype=float)
