@@ -14,13 +14,25 @@ the path continues on the other pair, which is the continuous motion (theta1 pas
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .api import IKResult, Status, assess, inverse_kinematics_pair, joint_bounds
 from .kinematics import axis_from_angles, wrap_angle
 from .machine import Machine
+
+
+@dataclass(frozen=True)
+class BranchState:
+    """What the IK of a path hands on to the poses after it, so that a long path solved a part
+    at a time (parts starting at a new sequence) gets the joints it would get all at once.
+    Angles in radians."""
+
+    previous: np.ndarray | None = None  # (theta1, theta2) at the end of the last run off the pole
+    wrapped: float | None = None  # theta2 as solved (wrapped) at the last pose off the pole
+    turns: float = 0.0  # what unwrapping added to it: its unwrapped theta2 is wrapped + turns
+    lead: float | None = None  # theta2 of the path's first pose off the pole, for the poses before it
 
 
 @dataclass(frozen=True)
@@ -31,6 +43,7 @@ class PathIK:
     axis: np.ndarray  # (N, 3) axis the joints realise (differs from the programmed one in the pole cone)
     in_cone: np.ndarray  # (N,) bool: theta2 was interpolated (axis within the pole cone)
     pair_switch: np.ndarray  # (N,) bool: the pair changed into this pose inside a sequence off the pole
+    state: BranchState = BranchState()  # to solve the poses after these
 
 
 def _pole_angle(axis: np.ndarray) -> np.ndarray:
@@ -150,13 +163,18 @@ def _fit_rotary(machine: Machine, theta2: np.ndarray, sequence: np.ndarray) -> n
 
 
 def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np.ndarray | None = None, *,
-               tool_length: float | np.ndarray = 0.0, cone: float = 0.0) -> PathIK:
+               tool_length: float | np.ndarray = 0.0, cone: float = 0.0, state: BranchState | None = None) -> PathIK:
     """Working-mode joints along N poses (tip mm, unit axis, table frame), continuous in theta.
 
     ``sequence`` ids mark stretches that must be continuous (default: one); ``tool_length``
     (mm) may vary per pose; ``cone`` (rad) is the pole cone. theta2 is unwrapped along the
     whole path (shortest way across rapids) and fitted into a limited rotary's range.
+
+    ``state``: the ``.state`` of the path before, when a path is solved a part at a time; each
+    part must start a sequence, and the poses on the pole before the first pose off it take
+    ``state.lead`` when this part has none off the pole (see :class:`BranchState`).
     """
+    state = state or BranchState()
     n = len(tip)
     sequence = np.zeros(n, int) if sequence is None else np.asarray(sequence)
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
@@ -166,16 +184,22 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
     plus, minus = (_pair_results(machine, tip, axis, lengths, np.full(n, p), np.zeros(n), with_margins=False)
                    for p in (1, -1))
     use_plus = np.ones(n, bool)
-    previous: np.ndarray | None = None
+    previous = state.previous
     for rows, fresh in _runs(sequence, in_cone):
         use_plus[rows] = _run_choice(plus, minus, rows, previous, fresh)
         previous = (plus if use_plus[rows[-1]] else minus).joints[rows[-1], 3:]
     chosen = plus.take(use_plus, minus)
     defined = np.flatnonzero(~in_cone & np.isfinite(chosen.joints[:, 4]))
     theta2 = np.zeros(n)
+    after = replace(state, previous=previous)
     if defined.size:
-        theta2[defined] = np.unwrap(chosen.joints[defined, 4])
-        theta2 = _interpolate_cone(theta2, defined, tip, sequence)
+        wrapped = chosen.joints[defined, 4]
+        theta2[defined], turns = _unwrap(wrapped, state.wrapped, state.turns)
+        after = replace(after, wrapped=float(wrapped[-1]), turns=turns,
+                        lead=float(theta2[defined[0]]) if state.lead is None else state.lead)
+    if defined.size < n:
+        held = None if state.wrapped is None else state.wrapped + state.turns
+        theta2 = _interpolate_cone(theta2, defined, tip, sequence, held, state.lead)
     theta2 = _fit_rotary(machine, theta2, sequence)
     result = assess(machine, chosen.with_joints(np.column_stack([chosen.joints[:, :4], theta2])), lengths)
     realised = axis.copy()
@@ -185,12 +209,31 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
         result = result.scatter(rows, redo)
     switch = np.r_[False, (use_plus[1:] != use_plus[:-1]) & (sequence[1:] == sequence[:-1])
                    & ~in_cone[1:] & ~in_cone[:-1]]
-    return PathIK(result, realised, in_cone, switch)
+    return PathIK(result, realised, in_cone, switch, after)
 
 
-def _interpolate_cone(theta2: np.ndarray, defined: np.ndarray, tip: np.ndarray, sequence: np.ndarray) -> np.ndarray:
+def _unwrap(wrapped: np.ndarray, last: float | None, turns: float) -> tuple[np.ndarray, float]:
+    """``np.unwrap(wrapped)`` (rad) continued from the angle ``last`` that unwrapping moved by
+    ``turns``: the same numbers, bit for bit, as unwrapping everything at once (numpy's steps,
+    the corrections summed in order). Returns the angles and what unwrapping added to the last."""
+    p = wrapped if last is None else np.r_[last, wrapped]
+    step = np.diff(p)
+    wrapped_step = np.mod(step + np.pi, 2 * np.pi) - np.pi
+    np.copyto(wrapped_step, np.pi, where=(wrapped_step == -np.pi) & (step > 0))
+    correction = wrapped_step - step
+    np.copyto(correction, 0, where=np.abs(step) < np.pi)
+    if last is None:
+        correction = np.r_[0.0, correction]
+    added = np.cumsum(np.r_[turns, correction])[1:]
+    return wrapped + added, float(added[-1])
+
+
+def _interpolate_cone(theta2: np.ndarray, defined: np.ndarray, tip: np.ndarray, sequence: np.ndarray,
+                      held: float | None = None, lead: float | None = None) -> np.ndarray:
     """theta2 at the undefined poses: linear in tip distance between the defined neighbours of
-    the same sequence, else held from the nearest defined pose."""
+    the same sequence, else held from the nearest defined pose (``held``: the last one before
+    these poses; ``lead``: the first one of the path, where no pose before or among these is
+    defined)."""
     n = len(theta2)
     is_defined = np.zeros(n, bool)
     is_defined[defined] = True
@@ -207,6 +250,10 @@ def _interpolate_cone(theta2: np.ndarray, defined: np.ndarray, tip: np.ndarray, 
             out[k] = theta2[b] + (target - theta2[b]) * (distance[k] - distance[b]) / (distance[a] - distance[b])
         elif b >= 0:
             out[k] = theta2[b]
+        elif held is not None:
+            out[k] = held
         elif a < n:
             out[k] = theta2[a]
+        elif lead is not None:
+            out[k] = lead
     return out

@@ -2,13 +2,23 @@
 
 parse CL -> machine poses -> IK and branch choice -> linearisation -> checks -> durations ->
 writer. Each stage is its own module; this one wires them and keeps the statistics.
+
+A long program goes through the stages after parsing a *part* at a time (:func:`post`), so
+that memory follows the largest part, not the program. A part starts at a rapid, where the
+machine stops anyway: the feed planning of a sequence never crosses one, the angle pair is
+chosen afresh there, and what carries across (the rotary's continuity, the last block for
+the moving checks, the rapid's timing and the verification) is handed on explicitly, so the
+program is the same however it is split. The report's figures are gathered part by part
+(:class:`Figures`). :func:`postprocess` runs the whole program as one part and keeps its arrays.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
@@ -17,17 +27,18 @@ import numpy as np
 
 from . import __version__
 from .api import JOINT_NAMES
-from .branch import PathIK, solve_path
+from .atomic import atomic_write
+from .branch import BranchState, PathIK, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
-from .gcode import GcodeFormat, Program, program_text, with_header_line, write_program, write_text
+from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
 from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
-from .toolpath import Dwell, ToolChange
-from .verify import Reference, Verification, verify_program
+from .toolpath import Dwell, Event, ToolChange
+from .verify import Reference, Verification, Verifier, verify_program
 
 if TYPE_CHECKING:
     from .placement import Placement
@@ -50,9 +61,123 @@ class PostOptions:
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
 
+_MARGINS = ("serial", "parallel", "machine", "rod_clearance")
+
+
+@dataclass
+class Figures:
+    """The report's figures of a program's blocks, gathered a part at a time (:meth:`add`): mm,
+    rad inside, seconds. The timing figures only where every part was planned."""
+
+    blocks: int = 0
+    inserted: int = 0
+    in_pole_cone: int = 0
+    cone_deviation: float = 0.0  # rad: largest axis deviation in the pole cone
+    low: np.ndarray = field(default_factory=lambda: np.full(5, np.inf))  # joint ranges (finite blocks)
+    high: np.ndarray = field(default_factory=lambda: np.full(5, -np.inf))
+    margins: dict[str, float] = field(default_factory=lambda: dict.fromkeys(_MARGINS, np.inf))
+    feed_length: float = 0.0
+    rapid_length: float = 0.0
+    time: float = 0.0  # s: sum of the block durations
+    rapid_time: float = 0.0
+    time_per_tool: dict[int, float] = field(default_factory=dict)
+    planned: bool = True  # every part has a schedule
+    budget: dict[str, float] = field(default_factory=dict)
+    ratios: np.ndarray = field(default_factory=lambda: np.zeros((3, 5)))  # velocity, acceleration, jerk / limit
+
+    def add(self, machine: Machine, poses: MachinePoses, path: PathIK, first: int, blocks: Blocks, rapid: np.ndarray,
+            duration: np.ndarray, schedule: Schedule | None, timing: bool, context: int = 0) -> None:
+        """Add the figures of a part: the path of poses ``first``... and its blocks; the first
+        ``context`` blocks belong to the part before (the motion from there counts);
+        ``timing``: also the planner's figures (time budget, ratios to the limits)."""
+        own = slice(context, None)
+        joints = blocks.joints[own]
+        finite = joints[np.all(np.isfinite(joints), axis=1)]
+        if len(finite):
+            self.low, self.high = np.fmin(self.low, finite.min(axis=0)), np.fmax(self.high, finite.max(axis=0))
+        self.blocks += len(joints)
+        self.inserted += int(np.sum(blocks.fraction[own] < 1))
+        self.in_pole_cone += int(path.in_cone.sum())
+        axis = poses.axis[first:first + len(path.axis)]
+        self.cone_deviation = max(self.cone_deviation, float(np.max(
+            2 * np.arcsin(np.linalg.norm(path.axis - axis, axis=1) / 2), initial=0.0)))
+        for name in _MARGINS:
+            self.margins[name] = float(np.fmin(self.margins[name], np.nanmin(
+                getattr(blocks.result.margins, name)[own], initial=np.inf)))
+        step = np.linalg.norm(np.diff(blocks.tip, axis=0), axis=1)
+        self.feed_length += float(np.sum(step[~rapid[1:]]))
+        self.rapid_length += float(np.sum(step[rapid[1:]]))
+        own_duration, own_rapid = duration[own], rapid[own]
+        self.time += float(np.sum(own_duration))
+        self.rapid_time += float(np.sum(own_duration[own_rapid]))
+        tools = poses.tool[blocks.pose[own]]
+        for tool in np.unique(tools):
+            self.time_per_tool[int(tool)] = self.time_per_tool.get(int(tool), 0.0) + float(
+                np.sum(own_duration[tools == tool]))
+        self.planned &= schedule is not None
+        if schedule is not None and timing:
+            limits = Limits.from_machine(machine)
+            self.ratios = np.maximum(self.ratios, limit_ratios(schedule, limits))
+            speed = feed_speed(poses, blocks, duration)
+            budget = time_budget(schedule, blocks.joints, blocks.tip, speed, limits,
+                                 np.radians(machine.timing.rotary_feed) / 60.0)
+            for name, value in budget.items():
+                self.budget[name] = self.budget.get(name, 0.0) + value
+
+
+def _finite(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
+def _report(machine: Machine, options: PostOptions, poses: MachinePoses, violations: list[Violation],
+            warnings: list[str], figures: Figures, placement: Placement | None, seconds: dict[str, float]
+            ) -> dict[str, Any]:
+    """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
+    scale = np.array([1.0, 1.0, 1.0, 180 / np.pi, 180 / np.pi])
+    ranges = {name: [float(figures.low[j] * scale[j]), float(figures.high[j] * scale[j])]
+              if figures.low[j] <= figures.high[j] else None for j, name in enumerate(JOINT_NAMES)}
+    timing = None
+    if figures.planned and figures.blocks:
+        dwell = sum(e.seconds for e in poses.events if isinstance(e, Dwell))
+        timing = {
+            "cycle_time_s": figures.time + dwell,
+            "dwell_time_s": dwell,
+            "rapid_time_s": figures.rapid_time,
+            **figures.budget,
+            "time_per_tool_s": {str(t): figures.time_per_tool[t] for t in sorted(figures.time_per_tool)},
+            "largest_ratio_to_limit": {name: dict(zip(("velocity", "acceleration", "jerk"),
+                                                      map(float, figures.ratios[:, j]), strict=True))
+                                       for j, name in enumerate(JOINT_NAMES)},
+        }
+    return {
+        "source": poses.source,
+        "dialect": poses.dialect,
+        "machine": machine.source,
+        "verne_post": __version__,
+        "ok": not violations,
+        "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in violations],
+        "warnings": warnings,
+        "points": {"cl": len(poses), "inserted": figures.inserted, "blocks": figures.blocks,
+                   "in_pole_cone": figures.in_pole_cone},
+        "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(figures.cone_deviation)),
+        "joint_ranges": ranges,
+        "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
+        "smallest_margins": {name: _finite(figures.margins[name]) for name in _MARGINS},
+        "path_length_mm": {"feed": figures.feed_length, "rapid": figures.rapid_length},
+        "estimated_time_s": figures.time,
+        "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
+        "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
+                   "length_from": t.source} for t in poses.tools],
+        "timing": timing,
+        "work_offset_mm": list(placement.offset if placement else _offset(machine, options)),
+        "placement": None if placement is None else placement.to_dict(),
+        "seconds": seconds,
+    }
+
+
 @dataclass
 class PostResult:
-    """What the pipeline produced; ``program`` is None when there are violations."""
+    """What the pipeline produced for the whole program; ``program`` is None when there are violations."""
 
     poses: MachinePoses
     path: PathIK
@@ -66,69 +191,15 @@ class PostResult:
     seconds: dict[str, float] = field(default_factory=dict)
     placement: Placement | None = None  # how the work offset was chosen (work_offset "auto")
 
+    def figures(self, machine: Machine, timing: bool = True) -> Figures:
+        figures = Figures()
+        figures.add(machine, self.poses, self.path, 0, self.blocks, self.rapid, self.duration, self.schedule, timing)
+        return figures
+
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
-        joints = self.blocks.joints
-        finite = np.all(np.isfinite(joints), axis=1)
-        ranges = {}
-        for j, name in enumerate(JOINT_NAMES):
-            values = joints[finite, j] * (1.0 if j < 3 else 180 / np.pi)
-            ranges[name] = [float(values.min()), float(values.max())] if values.size else None
-        margins = self.blocks.result.margins
-        tips = self.blocks.tip
-        feed_length = float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[~self.rapid[1:]]))
-        return {
-            "source": self.poses.source,
-            "dialect": self.poses.dialect,
-            "machine": machine.source,
-            "verne_post": __version__,
-            "ok": not self.violations,
-            "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in self.violations],
-            "warnings": self.warnings,
-            "points": {"cl": len(self.poses), "inserted": int(np.sum(self.blocks.fraction < 1)), "blocks": len(tips),
-                       "in_pole_cone": int(self.path.in_cone.sum())},
-            "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(np.max(
-                2 * np.arcsin(np.linalg.norm(self.path.axis - self.poses.axis, axis=1) / 2), initial=0.0))),
-            "joint_ranges": ranges,
-            "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
-            "smallest_margins": {name: _nanmin(getattr(margins, name)) for name in
-                                 ("serial", "parallel", "machine", "rod_clearance")},
-            "path_length_mm": {"feed": feed_length,
-                               "rapid": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[self.rapid[1:]]))},
-            "estimated_time_s": float(np.sum(self.duration)),
-            "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
-            "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
-                       "length_from": t.source} for t in self.poses.tools],
-            "timing": self._timing(machine),
-            "work_offset_mm": list(self.placement.offset if self.placement else _offset(machine, options)),
-            "placement": None if self.placement is None else self.placement.to_dict(),
-            "seconds": self.seconds,
-        }
-
-    def _timing(self, machine: Machine) -> dict[str, Any] | None:
-        if self.schedule is None:
-            return None
-        limits = Limits.from_machine(machine)
-        tools = self.poses.tool[self.blocks.pose]
-        ratios = limit_ratios(self.schedule, limits)
-        speed = feed_speed(self.poses, self.blocks, self.duration)
-        budget = time_budget(self.schedule, self.blocks.joints, self.blocks.tip, speed, limits,
-                             np.radians(machine.timing.rotary_feed) / 60.0)
-        dwell = sum(e.seconds for e in self.poses.events if isinstance(e, Dwell))
-        return {
-            "cycle_time_s": self.schedule.total + dwell,
-            "dwell_time_s": dwell,
-            "rapid_time_s": float(np.sum(self.duration[self.rapid])),
-            **budget,
-            "time_per_tool_s": {str(t): float(np.sum(self.duration[tools == t])) for t in np.unique(tools)},
-            "largest_ratio_to_limit": {name: {"velocity": float(ratios[0, j]), "acceleration": float(ratios[1, j]),
-                                              "jerk": float(ratios[2, j])} for j, name in enumerate(JOINT_NAMES)},
-        }
-
-
-def _nanmin(values: np.ndarray) -> float | None:
-    finite = values[np.isfinite(values)]
-    return float(finite.min()) if finite.size else None
+        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures(machine),
+                       self.placement, self.seconds)
 
 
 def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
@@ -175,11 +246,13 @@ class Checked:
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None) -> Checked:
+                lap: Callable[[str], None] = lambda stage: None, state: BranchState | None = None) -> Checked:
     """IK and branch, linearisation and every check of table-frame poses (no timing); violations
-    sorted by line. Placement calls this for each candidate work offset."""
+    sorted by line. Placement calls this for each candidate work offset; :func:`post` for each
+    part of a program, with the ``state`` of the IK of the part before."""
     cone = np.radians(machine.pole.cone)
-    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
+    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone,
+                        state=state)
     lap("ik")
     blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
     lap("linearise")
@@ -196,64 +269,280 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     return Checked(solved, blocks, rapid, tuple(violations))
 
 
-def postprocess(path: str | Path, machine: Machine, options: PostOptions,
-                progress: Callable[[str], None] = lambda stage: None) -> PostResult:
-    """Run every stage except writing. Raises InputError for bad input; violations are returned."""
-    seconds: dict[str, float] = {}
-    clock = time.perf_counter()
+#: CL poses per part of a program (:func:`post`): a part ends at the first rapid after this many.
+PART_POSES = 20_000
 
-    def lap(stage: str) -> None:
-        nonlocal clock
+
+def part_ranges(poses: MachinePoses, size: int = PART_POSES) -> list[tuple[int, int]]:
+    """(first, end) pose ranges of the parts of a program: each but the first starts at a rapid,
+    at least ``size`` poses after the start of the part before."""
+    rapids = np.flatnonzero(poses.rapid)
+    starts = [0]
+    while (k := int(np.searchsorted(rapids, starts[-1] + size))) < len(rapids):
+        starts.append(int(rapids[k]))
+    return list(zip(starts, [*starts[1:], len(poses)], strict=True))
+
+
+@dataclass(frozen=True)
+class Part:
+    """Poses ``first`` to ``end - 1`` through stages 3 to 5; ``blocks`` (pose indices of the whole
+    program) without those that move no joint, ``context`` of them (0 or 1) being the last block
+    of the part before, there for the motion from it (``schedule`` counts it too)."""
+
+    first: int
+    end: int
+    path: PathIK
+    blocks: Blocks
+    rapid: np.ndarray
+    duration: np.ndarray  # s
+    schedule: Schedule | None
+    context: int
+    checks: list[Violation]  # stage 3 checks, one per line and kind
+    others: list[Violation]  # paths out of tolerance, angle pair switches
+    timing: list[Violation]
+    warnings: list[str]
+
+    @property
+    def own(self) -> slice:
+        return slice(self.context, None)
+
+
+def _lead(machine: Machine, poses: MachinePoses, ranges: list[tuple[int, int]]) -> float | None:
+    """theta2 (rad) of the program's first pose off the pole, from the first of ``ranges`` that
+    has one (None: no pose is off the pole)."""
+    cone = np.radians(machine.pole.cone)
+    for first, end in ranges:
+        part = poses.part(first, end)
+        if np.any(np.arctan2(np.hypot(part.axis[:, 0], part.axis[:, 1]), part.axis[:, 2]) >= max(cone, 1e-12)):
+            lead = solve_path(machine, part.tip, part.axis, part.sequence, tool_length=part.tool_length,
+                              cone=cone).state.lead
+            if lead is not None:
+                return lead
+    return None
+
+
+def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, ranges: list[tuple[int, int]],
+           lap: Callable[[str], None], plan: Callable[[list[Violation]], bool]) -> Iterator[Part]:
+    """Stages 3 to 5 of each part in turn; ``plan(violations)``: whether to plan the timing of a
+    part with these violations."""
+    state = BranchState()
+    before: tuple[Blocks, bool] | None = None  # the last block so far and whether it is a rapid
+    for k, (first, end) in enumerate(ranges):
+        if state.wrapped is None and state.lead is None and k + 1 < len(ranges):
+            # the poses on the pole before the first pose off it take its theta2, wherever it is
+            part_state = replace(state, lead=_lead(machine, poses, ranges[k:]))
+        else:
+            part_state = state
+        part = poses.part(first, end)
+        checked = check_poses(machine, part, options, lap, part_state)
+        state = checked.path.state
+        blocks, rapid = checked.blocks.shifted(first), checked.rapid
+        checks = [v for v in checked.violations if v.kind not in ("path", "branch")]
+        others = [v for v in checked.violations if v.kind in ("path", "branch")]
+        context = 0
+        if before is not None:
+            # the rapid into this part, from the last block of the part before
+            blocks, rapid, context = before[0].then(blocks), np.r_[before[1], rapid], 1
+            checks += check_program(machine, blocks.result.rows(slice(0, 2)), rapid[:2],
+                                    poses.tool_length[blocks.pose[:2]], poses.line[blocks.pose[:2]], context=1)
+        lines = poses.line[blocks.pose]
+        warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, poses.source)
+        lap("checks")
+        # Blocks that move no joint (repeated CL points) take no time and are left out.
+        moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
+        blocks, rapid = blocks.rows(moving), rapid[moving]
+        duration = block_durations(machine, poses, blocks, rapid)
+        schedule, timing = None, []
+        if plan(checks + others):
+            try:
+                schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
+                                        poses.sequence[blocks.pose], Limits.from_machine(machine),
+                                        rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
+                                        corner=np.radians(machine.timing.corner_angle), workers=options.workers)
+                duration = schedule.duration
+            except SequenceError as error:
+                timing.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
+                                        f"cannot plan the feed motion: {error}"))
+            lap("timing")
+        before = (blocks.rows(slice(-1, None)), bool(rapid[-1]))
+        yield Part(first, end, checked.path, blocks, rapid, duration, schedule, context, checks, others, timing,
+                   warnings)
+
+
+def _violations(checks: list[Violation], others: list[Violation], timing: list[Violation],
+                placement: Placement | None) -> list[Violation]:
+    """The violations of the parts as the whole program's checks give them: one per line and kind
+    from the checks, sorted by line, the infeasible placement first, timing last."""
+    unique: dict[tuple[int, str], Violation] = {}
+    for v in checks:
+        unique.setdefault((v.line, v.kind), v)
+    violations = sorted([*unique.values(), *others], key=lambda v: (v.line, v.kind))
+    if placement is not None and not placement.feasible:
+        violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
+                                                                    f"{placement.reason}"))
+    return violations + timing
+
+
+def _cone_warning(machine: Machine, options: PostOptions, source: str) -> str:
+    return (f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the axis "
+            f"tolerance ({options.axis_tol:g} deg): near the table normal the tool axis may be off by up to "
+            f"{machine.pole.cone:g} deg")
+
+
+class _Clock:
+    """Seconds per stage, summed over the parts; each lap is reported to ``progress``."""
+
+    def __init__(self, progress: Callable[[str], None]) -> None:
+        self.seconds: dict[str, float] = {}
+        self.progress = progress
+        self.clock = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
         now = time.perf_counter()
-        seconds[stage] = now - clock
-        clock = now
-        progress(stage)
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self.clock
+        self.clock = now
+        self.progress(stage)
 
+
+def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clock: _Clock
+                   ) -> tuple[MachinePoses, PostOptions, Placement | None]:
+    """Stages 1 and 2: the CL file read, the work offset placed, the poses in the table frame."""
     toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
                              arc_direction=options.arc_direction, frame=options.frame)
-    lap("parse")
+    clock.lap("parse")
     placement = None
     if options.work_offset == "auto":
         from .placement import place
 
         zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length)
-        placement = place(machine, zero, options, progress=progress)
+        placement = place(machine, zero, options, progress=clock.progress)
         options = replace(options, work_offset=placement.offset)
-        lap("placement")
-    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options),
-                          tool_length=options.tool_length)
-    checked = check_poses(machine, poses, options, lap)
-    solved, blocks, rapid, violations = checked.path, checked.blocks, checked.rapid, list(checked.violations)
-    if placement is not None and not placement.feasible:
-        violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
-                                                                    f"{placement.reason}"))
-    lines = poses.line[blocks.pose]
-    source = poses.source
-    warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
-    if solved.in_cone.any() and machine.pole.cone > options.axis_tol:
-        warnings.append(f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the "
-                        f"axis tolerance ({options.axis_tol:g} deg): near the table normal the tool axis may be off "
-                        f"by up to {machine.pole.cone:g} deg")
-    lap("checks")
-    # Blocks that move no joint (repeated CL points) take no time and are left out.
-    moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
-    blocks, rapid = blocks.rows(moving), rapid[moving]
-    duration = block_durations(machine, poses, blocks, rapid)
-    schedule = None
-    if not violations and options.plan:
-        try:
-            schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
-                                    poses.sequence[blocks.pose], Limits.from_machine(machine),
-                                    rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
-                                    corner=np.radians(machine.timing.corner_angle), workers=options.workers)
-            duration = schedule.duration
-        except SequenceError as error:
-            violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
-                                        f"cannot plan the feed motion: {error}"))
-        lap("timing")
-    program = None if violations else _program(machine, poses, blocks, rapid, duration, options, placement)
-    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, schedule, seconds,
-                      placement)
+        clock.lap("placement")
+    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options), tool_length=options.tool_length)
+    return poses, options, placement
+
+
+def postprocess(path: str | Path, machine: Machine, options: PostOptions,
+                progress: Callable[[str], None] = lambda stage: None) -> PostResult:
+    """Run every stage except writing, on the whole program at once (its arrays are kept: for a
+    long program, :func:`post`). Raises InputError for bad input; violations are returned."""
+    clock = _Clock(progress)
+    poses, options, placement = _machine_poses(path, machine, options, clock)
+    feasible = placement is None or placement.feasible
+    part = next(_parts(machine, poses, options, [(0, len(poses))], clock.lap,
+                       plan=lambda found: options.plan and feasible and not found))
+    violations = _violations(part.checks, part.others, part.timing, placement)
+    warnings = list(poses.warnings) + part.warnings
+    if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
+        warnings.append(_cone_warning(machine, options, poses.source))
+    program = None
+    if not violations:
+        figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction < 1)),
+                          time=float(np.sum(part.duration)))
+        program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, part.duration,
+                         _at_blocks(_events(poses), part.blocks))
+    return PostResult(poses, part.path, part.blocks, part.rapid, part.duration, violations, warnings, program,
+                      part.schedule, clock.seconds, placement)
+
+
+@dataclass
+class Posted:
+    """What :func:`post` did: the violations (then nothing was written), the verification of the
+    program (None without), and the report's figures gathered over the parts."""
+
+    poses: MachinePoses
+    violations: list[Violation]
+    warnings: list[str]
+    figures: Figures
+    verification: Verification | None
+    parts: int
+    seconds: dict[str, float] = field(default_factory=dict)
+    placement: Placement | None = None
+
+    def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
+        """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
+        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures, self.placement,
+                       self.seconds)
+
+
+def post(path: str | Path, machine: Machine, options: PostOptions, output: str | os.PathLike[str] | None = None,
+         *, verify: bool = True, timing_figures: bool = False, part_poses: int = PART_POSES,
+         progress: Callable[[str], None] = lambda stage: None,
+         before_writing: Callable[[Posted], None] = lambda posted: None) -> Posted:
+    """Every stage, a part of the program at a time (see the module docstring), writing the
+    G-code to ``output`` (atomically; None: only check).
+
+    The blocks of each part are formatted, verified (with ``verify``: read back from their text
+    and checked against the part's CL poses, :class:`~verne_post.verify.Verifier`) and set
+    aside in a temporary file; the output is written only when no part has a violation and the
+    verification passes, with the header's figures (block count, cycle time, the certified
+    deviations) known from all the parts. ``timing_figures``: gather the planner's figures for
+    the report (time budget, ratios to the limits), which cost time. After a violation the
+    remaining parts are still checked (every violation is reported) but no longer planned.
+    ``before_writing`` gets the outcome before the output is written (and may stop it, raising).
+    """
+    clock = _Clock(progress)
+    poses, options, placement = _machine_poses(path, machine, options, clock)
+    ranges = part_ranges(poses, part_poses)
+    fmt = gcode_format(machine)
+    writer = GcodeWriter(fmt)
+    verifier = Verifier(machine, source=str(output), tol=options.tol, axis_tol=options.axis_tol,
+                        work_offset=_offset(machine, options)) if verify and output is not None else None
+    # the header's figures are known at the end: the head is verified with those of an empty program
+    head = writer.head(_frame(machine, poses, options, placement, Figures()))
+    events, tools = _events(poses), {t.number: (t.length, t.delta) for t in poses.tools}
+    figures = Figures()
+    checks: list[Violation] = []
+    others: list[Violation] = []
+    timing: list[Violation] = []
+    warnings = list(poses.warnings)
+    in_cone = False
+    failed = placement is not None and not placement.feasible
+
+    def plan(found: list[Violation]) -> bool:
+        return options.plan and not failed and not found
+
+    with tempfile.TemporaryFile("w+", encoding="ascii", newline="\n") as spool:
+        for k, part in enumerate(_parts(machine, poses, options, ranges, clock.lap, plan)):
+            failed = failed or bool(part.checks or part.others or part.timing)
+            checks += part.checks
+            others += part.others
+            timing += part.timing
+            figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, part.duration,
+                        part.schedule, timing_figures, part.context)
+            warnings += part.warnings
+            in_cone = in_cone or bool(part.path.in_cone.any())
+            if output is not None and not failed:
+                own, last = part.own, k + 1 == len(ranges)
+                blocks = part.blocks.rows(own)
+                mine = [e for e in events if part.first <= e.index < part.end or (last and e.index >= part.end)]
+                text = "".join(writer.body(Program(blocks.joints, part.rapid[own], part.duration[own],
+                                                   poses.line[blocks.pose], _at_blocks(mine, blocks),
+                                                   tool_lengths=tools)))
+                spool.write(text)
+                clock.lap("write")
+                if verifier is not None:
+                    verifier.read((head if k == 0 else "") + text + (writer.tail() if last else ""),
+                                  Reference.of(poses.part(part.first, part.end)), final=last)
+                    clock.lap("verify")
+            clock.progress(f"part {k + 1} of {len(ranges)}")
+        if in_cone and machine.pole.cone > options.axis_tol:
+            warnings.append(_cone_warning(machine, options, poses.source))
+        violations = _violations(checks, others, timing, placement)
+        verification = verifier.result() if verifier is not None and not violations else None
+        posted = Posted(poses, violations, warnings, figures, verification, len(ranges), clock.seconds, placement)
+        before_writing(posted)
+        if output is not None and not violations and (verification is None or verification.ok):
+            head = GcodeWriter(fmt).head(_frame(machine, poses, options, placement, figures))
+            if verification is not None:
+                head = with_header_line(head, verification.certificate())
+            spool.seek(0)
+            with atomic_write(output) as handle:
+                handle.write(head)
+                shutil.copyfileobj(spool, handle, 1 << 20)
+                handle.write(writer.tail())
+            clock.lap("write")
+    return posted
 
 
 def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
@@ -263,14 +552,26 @@ def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float
     return offset
 
 
-def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
-             options: PostOptions, placement: Placement | None) -> Program:
-    events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
+def _events(poses: MachinePoses) -> list[Event]:
+    """The program's events, before the pose of their index."""
+    events = list(poses.events)
     if poses.tools and poses.tools[0].source == "--tool-length" and poses.tools[0].number == 0:
         # motion before any tool change: the program still says which tool length its joints are for
         events.insert(0, ToolChange(0, poses.tools[0].line, 0, poses.tools[0].length))
+    return events
+
+
+def _at_blocks(events: list[Event], blocks: Blocks) -> tuple[Event, ...]:
+    """The events with the index of the block they come before (len(blocks.pose): after the last)."""
+    return tuple(replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in events)
+
+
+def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placement: Placement | None,
+           figures: Figures, blocks: Blocks | None = None, rapid: np.ndarray | None = None,
+           duration: np.ndarray | None = None, events: tuple[Event, ...] = ()) -> Program:
+    """The program with its header (block counts and cycle time from ``figures``); its blocks
+    (mm, rad, s), if given, and their ``events``."""
     offset = _offset(machine, options)
-    tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (
         f"POSTPROCESSOR VERNE-POST {__version__}",
         f"MACHINE {machine.source} ({machine.name})",
@@ -280,16 +581,18 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (
             "WORK OFFSET FROM " + ("THE MACHINE FILE" if options.work_offset is None else "THE USER"),)),
-        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "
-        f"(CL POINTS {len(poses)}, INSERTED {int(np.sum(blocks.fraction < 1))})",
-        f"CYCLE TIME {np.sum(duration):.1f} S ({_TIME_BASIS[options.plan]})",
+        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {figures.blocks} "
+        f"(CL POINTS {len(poses)}, INSERTED {figures.inserted})",
+        f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]})",
     )
-    if any(isinstance(e, ToolChange) and e.tool == 0 for e in events):
+    if any(isinstance(e, ToolChange) and e.tool == 0 for e in _events(poses)):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
-    return Program(
-        joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=tuple(events),
-        part_name=poses.part_name, header=header, tool_lengths=tools,
-    )
+    tools = {t.number: (t.length, t.delta) for t in poses.tools}
+    if blocks is None:
+        return Program(np.zeros((0, 5)), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64),
+                       part_name=poses.part_name, header=header, tool_lengths=tools)
+    return Program(joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=events,
+                   part_name=poses.part_name, header=header, tool_lengths=tools)
 
 
 _TIME_BASIS = {True: "PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS",
@@ -337,5 +640,5 @@ def gcode_format(machine: Machine) -> GcodeFormat:
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
-__all__ = ["Checked", "PostOptions", "PostResult", "block_durations", "check_poses", "feed_speed", "gcode_format",
-           "postprocess", "write_gcode", "write_output"]
+__all__ = ["Checked", "Figures", "PostOptions", "PostResult", "Posted", "block_durations", "check_poses", "feed_speed",
+           "gcode_format", "part_ranges", "post", "postprocess", "write_gcode", "write_output"]
