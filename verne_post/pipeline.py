@@ -26,16 +26,16 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from . import __version__
-from .api import JOINT_NAMES
+from .api import JOINT_NAMES, joint_bounds
 from .atomic import atomic_write
-from .branch import BranchState, PathIK, solve_path
+from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
 from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
-from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
+from .schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import Dwell, Event, ToolChange
 from .verify import Reference, Verification, Verifier, verify_program
@@ -246,41 +246,47 @@ class Checked:
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None, state: BranchState | None = None) -> Checked:
+                lap: Callable[[str], None] = lambda stage: None) -> Checked:
     """IK and branch, linearisation and every check of table-frame poses (no timing); violations
-    sorted by line. Placement calls this for each candidate work offset; :func:`post` for each
-    part of a program, with the ``state`` of the IK of the part before."""
-    cone = np.radians(machine.pole.cone)
-    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone,
-                        state=state)
+    sorted by line. Placement calls this for each candidate work offset."""
+    solved = _solve(machine, poses, options)
     lap("ik")
-    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone)
+    blocks = _linearise(machine, poses, options, solved)
     lap("linearise")
     rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
-    violations = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
-    for k in blocks.unresolved:
-        violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
-                                                                f"{options.axis_tol} deg of the CL path"))
-    for k in np.flatnonzero(solved.pair_switch):
-        violations.append(Violation(int(poses.line[k]), "branch", "no single tool-axis angle pair reaches this whole "
-                                                                  "cut: the table would turn half a turn mid-cut"))
-    violations.sort(key=lambda v: (v.line, v.kind))
-    return Checked(solved, blocks, rapid, tuple(violations))
+    checks, others = _checks(machine, poses, options, solved.pair_switch, blocks, rapid)
+    return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
 
 
-#: CL poses per part of a program (:func:`post`): a part ends at the first rapid after this many.
+def _solve(machine: Machine, poses: MachinePoses, options: PostOptions, state: BranchState | None = None,
+           pairs: Pairs | None = None) -> PathIK:
+    return solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length,
+                      cone=np.radians(machine.pole.cone), state=state, pairs=pairs)
+
+
+def _linearise(machine: Machine, poses: MachinePoses, options: PostOptions, solved: PathIK) -> Blocks:
+    return linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol),
+                     cone=np.radians(machine.pole.cone))
+
+
+def _checks(machine: Machine, poses: MachinePoses, options: PostOptions, switch: np.ndarray, blocks: Blocks,
+            rapid: np.ndarray, first: int = 0) -> tuple[list[Violation], list[Violation]]:
+    """The violations of blocks (poses indexing ``poses``) and of the angle pair switches of poses
+    ``first``...: those of the checks (one per line and kind) and the others."""
+    checks = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
+    others = [Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
+                                                    f"{options.axis_tol} deg of the CL path")
+              for k in blocks.unresolved]
+    others += [Violation(int(poses.line[first + k]), "branch", "no single tool-axis angle pair reaches this whole "
+                                                               "cut: the table would turn half a turn mid-cut")
+               for k in np.flatnonzero(switch)]
+    return checks, others
+
+
+#: CL poses per part of a program (:func:`post`): a part ends where the machine stops, at a
+#: rapid or between feed sequences, at the last such place among this many poses.
 PART_POSES = 20_000
-
-
-def part_ranges(poses: MachinePoses, size: int = PART_POSES) -> list[tuple[int, int]]:
-    """(first, end) pose ranges of the parts of a program: each but the first starts at a rapid,
-    at least ``size`` poses after the start of the part before."""
-    rapids = np.flatnonzero(poses.rapid)
-    starts = [0]
-    while (k := int(np.searchsorted(rapids, starts[-1] + size))) < len(rapids):
-        starts.append(int(rapids[k]))
-    return list(zip(starts, [*starts[1:], len(poses)], strict=True))
 
 
 @dataclass(frozen=True)
@@ -307,48 +313,87 @@ class Part:
         return slice(self.context, None)
 
 
-def _lead(machine: Machine, poses: MachinePoses, ranges: list[tuple[int, int]]) -> float | None:
-    """theta2 (rad) of the program's first pose off the pole, from the first of ``ranges`` that
-    has one (None: no pose is off the pole)."""
-    cone = np.radians(machine.pole.cone)
-    for first, end in ranges:
-        part = poses.part(first, end)
-        if np.any(np.arctan2(np.hypot(part.axis[:, 0], part.axis[:, 1]), part.axis[:, 2]) >= max(cone, 1e-12)):
-            lead = solve_path(machine, part.tip, part.axis, part.sequence, tool_length=part.tool_length,
-                              cone=cone).state.lead
-            if lead is not None:
-                return lead
-    return None
+def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
+    """The angle pairs along the whole program, from both pairs' IK solved ``size`` poses at a
+    time (the choice weighs whole runs: it is made before the parts are solved)."""
+    plus, minus = [], []
+    for first in range(0, len(poses), size):
+        part = poses.part(first, first + size)
+        both = both_pairs(machine, part.tip, part.axis, part.tool_length)
+        for out, result in zip((plus, minus), both, strict=True):
+            out.append(PairAngles(result.status, result.joints[:, 3:].copy()))
+    return choose_pairs(PairAngles.joined(plus), PairAngles.joined(minus), poses.sequence,
+                        in_pole_cone(poses.axis, np.radians(machine.pole.cone)))
 
 
-def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, ranges: list[tuple[int, int]],
-           lap: Callable[[str], None], plan: Callable[[list[Violation]], bool]) -> Iterator[Part]:
-    """Stages 3 to 5 of each part in turn; ``plan(violations)``: whether to plan the timing of a
-    part with these violations."""
+def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: PathIK, ext: Blocks,
+         rapid: np.ndarray) -> int | None:
+    """Where the part of poses ``first``... solved up to ``end`` ends: the last place before
+    ``end`` where the machine stops whatever comes after (None: none). ``ext``: the moving
+    blocks from the part before's last, ``rapid`` theirs.
+
+    A rapid, or the first block of a pose that starts a feed sequence (the planner plans each
+    from rest to rest) with its CL line not the pose before's (a record's points, an arc's,
+    stay together) and the pose before off the pole cone with a solution (the cone's theta2 is
+    interpolated between such poses), on a continuous rotary (a limited one is fitted into its
+    range a sequence at a time).
+    """
+    candidates = first + 1 + np.flatnonzero(poses.rapid[first + 1:end])
+    if not np.isfinite(joint_bounds(machine)[0][4]):
+        starts = np.array([a for a, _ in feed_sequences(ext.joints, rapid, poses.sequence[ext.pose],
+                                                        Limits.from_machine(machine),
+                                                        np.radians(machine.timing.corner_angle))], int)
+        starts = starts[starts >= 2]  # the turn into a block weighs the two blocks before it
+        pose = ext.pose[starts]
+        pose = pose[(pose > first) & (pose < end) & (ext.pose[starts - 1] == pose - 1)]  # a pose's first block
+        pose = pose[(poses.line[pose] != poses.line[pose - 1]) & np.isfinite(solved.trace.added[pose - 1 - first])]
+        candidates = np.r_[candidates, pose]
+    return int(candidates.max()) if candidates.size else None
+
+
+def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: int, lap: Callable[[str], None],
+           plan: Callable[[list[Violation]], bool]) -> Iterator[Part]:
+    """Stages 3 to 5 of each part in turn (one part when ``size`` covers the program);
+    ``plan(violations)``: whether to plan the timing of a part with these violations."""
+    n = len(poses)
+    pairs = None if size >= n else _choose_pairs(machine, poses, size)
     state = BranchState()
-    before: tuple[Blocks, bool] | None = None  # the last block so far and whether it is a rapid
-    for k, (first, end) in enumerate(ranges):
-        if state.wrapped is None and state.lead is None and k + 1 < len(ranges):
-            # the poses on the pole before the first pose off it take its theta2, wherever it is
-            part_state = replace(state, lead=_lead(machine, poses, ranges[k:]))
-        else:
-            part_state = state
-        part = poses.part(first, end)
-        checked = check_poses(machine, part, options, lap, part_state)
-        state = checked.path.state
-        blocks, rapid = checked.blocks.shifted(first), checked.rapid
-        checks = [v for v in checked.violations if v.kind not in ("path", "branch")]
-        others = [v for v in checked.violations if v.kind in ("path", "branch")]
+    last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
+    before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
+    first = 0
+    while first < n:
+        end = min(n, first + size)
+        while True:
+            solved = _solve(machine, poses.part(first, end), options, state,
+                            None if pairs is None else pairs.part(first, end))
+            lap("ik")
+            context = int(last is not None and not poses.rapid[first])  # a feed move from the part before
+            blocks = _linearise(machine, poses.part(first - context, end), options,
+                                last.then(solved) if context else solved).shifted(first - context)
+            blocks = blocks.rows(slice(np.searchsorted(blocks.pose, first), None))
+            lap("linearise")
+            rapid = poses.rapid[blocks.pose].copy()
+            rapid[0] |= first == 0  # where the machine stands before the program is unknown: position with G0
+            ext, ext_rapid = (blocks, rapid) if before is None else (before[0].then(blocks), np.r_[before[1], rapid])
+            # Blocks that move no joint (repeated CL points) take no time and are left out.
+            moving = np.flatnonzero(np.r_[True, np.any(np.diff(ext.joints, axis=0) != 0, axis=1)])
+            cut = n if end == n else _cut(machine, poses, first, end, solved, ext.rows(moving), ext_rapid[moving])
+            if cut is not None:
+                break
+            end = min(n, first + 2 * (end - first))
+        k = int(np.searchsorted(blocks.pose, cut))
+        blocks, rapid = blocks.rows(slice(0, k)), rapid[:k]
+        blocks = replace(blocks, unresolved=blocks.unresolved[blocks.unresolved < cut])
+        path = solved.rows(slice(0, cut - first))
+        checks, others = _checks(machine, poses, options, path.pair_switch, blocks, rapid, first)
         context = 0
-        if before is not None:
-            # the rapid into this part, from the last block of the part before
+        if before is not None:  # the move into this part, from the last block of the part before
             blocks, rapid, context = before[0].then(blocks), np.r_[before[1], rapid], 1
             checks += check_program(machine, blocks.result.rows(slice(0, 2)), rapid[:2],
                                     poses.tool_length[blocks.pose[:2]], poses.line[blocks.pose[:2]], context=1)
-        lines = poses.line[blocks.pose]
-        warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, poses.source)
+        warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, poses.line[blocks.pose],
+                                        poses.source)
         lap("checks")
-        # Blocks that move no joint (repeated CL points) take no time and are left out.
         moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
         blocks, rapid = blocks.rows(moving), rapid[moving]
         duration = block_durations(machine, poses, blocks, rapid)
@@ -364,9 +409,10 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, ranges: 
                 timing.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
                                         f"cannot plan the feed motion: {error}"))
             lap("timing")
+        yield Part(first, cut, path, blocks, rapid, duration, schedule, context, checks, others, timing, warnings)
+        state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
         before = (blocks.rows(slice(-1, None)), bool(rapid[-1]))
-        yield Part(first, end, checked.path, blocks, rapid, duration, schedule, context, checks, others, timing,
-                   warnings)
+        first = cut
 
 
 def _violations(checks: list[Violation], others: list[Violation], timing: list[Violation],
@@ -429,7 +475,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     clock = _Clock(progress)
     poses, options, placement = _machine_poses(path, machine, options, clock)
     feasible = placement is None or placement.feasible
-    part = next(_parts(machine, poses, options, [(0, len(poses))], clock.lap,
+    part = next(_parts(machine, poses, options, len(poses), clock.lap,
                        plan=lambda found: options.plan and feasible and not found))
     violations = _violations(part.checks, part.others, part.timing, placement)
     warnings = list(poses.warnings) + part.warnings
@@ -483,7 +529,6 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     """
     clock = _Clock(progress)
     poses, options, placement = _machine_poses(path, machine, options, clock)
-    ranges = part_ranges(poses, part_poses)
     fmt = gcode_format(machine)
     writer = GcodeWriter(fmt)
     verifier = Verifier(machine, source=str(output), tol=options.tol, axis_tol=options.axis_tol,
@@ -503,7 +548,7 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
         return options.plan and not failed and not found
 
     with tempfile.TemporaryFile("w+", encoding="ascii", newline="\n") as spool:
-        for k, part in enumerate(_parts(machine, poses, options, ranges, clock.lap, plan)):
+        for k, part in enumerate(_parts(machine, poses, options, part_poses, clock.lap, plan)):
             failed = failed or bool(part.checks or part.others or part.timing)
             checks += part.checks
             others += part.others
@@ -513,7 +558,7 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
             warnings += part.warnings
             in_cone = in_cone or bool(part.path.in_cone.any())
             if output is not None and not failed:
-                own, last = part.own, k + 1 == len(ranges)
+                own, last = part.own, part.end == len(poses)
                 blocks = part.blocks.rows(own)
                 mine = [e for e in events if part.first <= e.index < part.end or (last and e.index >= part.end)]
                 text = "".join(writer.body(Program(blocks.joints, part.rapid[own], part.duration[own],
@@ -525,12 +570,12 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
                     verifier.read((head if k == 0 else "") + text + (writer.tail() if last else ""),
                                   Reference.of(poses.part(part.first, part.end)), final=last)
                     clock.lap("verify")
-            clock.progress(f"part {k + 1} of {len(ranges)}")
+            clock.progress(f"pose {part.end} of {len(poses)}")
         if in_cone and machine.pole.cone > options.axis_tol:
             warnings.append(_cone_warning(machine, options, poses.source))
         violations = _violations(checks, others, timing, placement)
         verification = verifier.result() if verifier is not None and not violations else None
-        posted = Posted(poses, violations, warnings, figures, verification, len(ranges), clock.seconds, placement)
+        posted = Posted(poses, violations, warnings, figures, verification, k + 1, clock.seconds, placement)
         before_writing(posted)
         if output is not None and not violations and (verification is None or verification.ok):
             head = GcodeWriter(fmt).head(_frame(machine, poses, options, placement, figures))
@@ -641,4 +686,4 @@ def gcode_format(machine: Machine) -> GcodeFormat:
 
 
 __all__ = ["Checked", "Figures", "PostOptions", "PostResult", "Posted", "block_durations", "check_poses", "feed_speed",
-           "gcode_format", "part_ranges", "post", "postprocess", "write_gcode", "write_output"]
+           "gcode_format", "post", "postprocess", "write_gcode", "write_output"]
