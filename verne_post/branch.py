@@ -155,10 +155,6 @@ class PairAngles:
     def of(cls, result: IKResult) -> PairAngles:
         return cls(result.status, result.joints[:, 3:])
 
-    @classmethod
-    def joined(cls, parts: list[PairAngles]) -> PairAngles:
-        return cls(np.concatenate([p.status for p in parts]), np.concatenate([p.angles for p in parts]))
-
 
 def _travel(result: PairAngles, rows: np.ndarray, previous: np.ndarray | None) -> tuple[float, float]:
     """Rotary travel (rad) along the rows, from the previous pose's (theta1, theta2) if given,

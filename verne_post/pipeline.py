@@ -316,14 +316,14 @@ class Part:
 def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
     """The angle pairs along the whole program, from both pairs' IK solved ``size`` poses at a
     time (the choice weighs whole runs: it is made before the parts are solved)."""
-    plus, minus = [], []
-    for first in range(0, len(poses), size):
+    n = len(poses)
+    plus, minus = (PairAngles(np.empty(n, np.int8), np.empty((n, 2))) for _ in range(2))
+    for first in range(0, n, size):
         part = poses.part(first, first + size)
-        both = both_pairs(machine, part.tip, part.axis, part.tool_length)
-        for out, result in zip((plus, minus), both, strict=True):
-            out.append(PairAngles(result.status, result.joints[:, 3:].copy()))
-    return choose_pairs(PairAngles.joined(plus), PairAngles.joined(minus), poses.sequence,
-                        in_pole_cone(poses.axis, np.radians(machine.pole.cone)))
+        for out, result in zip((plus, minus), both_pairs(machine, part.tip, part.axis, part.tool_length),
+                               strict=True):
+            out.status[first:first + size], out.angles[first:first + size] = result.status, result.joints[:, 3:]
+    return choose_pairs(plus, minus, poses.sequence, in_pole_cone(poses.axis, np.radians(machine.pole.cone)))
 
 
 def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: PathIK, ext: Blocks,
