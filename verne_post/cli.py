@@ -472,8 +472,8 @@ def _run_post(cl_file: str, output: str | None, verify: bool, report_path: str |
     machine = load_machine(machine_path)
     stream = sys.stderr if not quiet and sys.stderr.isatty() else io.StringIO()
     with click.progressbar(length=1, label="verne-post", file=stream) as bar:
-        def progress(stage: str) -> None:  # "part K of N" after each part
-            if stage.startswith("part "):
+        def progress(stage: str) -> None:  # "pose K of N" after each part
+            if stage.startswith("pose "):
                 done, total = map(int, stage.split()[1::2])
                 bar.length = total
                 bar.update(done - bar.pos)

@@ -14,6 +14,7 @@ program is the same however it is split. The report's figures are gathered part 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import tempfile
@@ -21,7 +22,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from .atomic import atomic_write
 from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
+from .errors import OutputError
 from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .linearise import Blocks, linearise
 from .machine import Machine
@@ -284,6 +286,10 @@ def _checks(machine: Machine, poses: MachinePoses, options: PostOptions, switch:
     return checks, others
 
 
+#: Violations gathered over the parts at most (the checks of one part report at most 10,000
+#: poses of a kind): memory stays bounded when a long program is wrong everywhere.
+MAX_VIOLATIONS = 20_000
+
 #: CL poses per part of a program (:func:`post`): a part ends where the machine stops, at a
 #: rapid or between feed sequences, at the last such place among this many poses.
 PART_POSES = 20_000
@@ -435,6 +441,22 @@ def _cone_warning(machine: Machine, options: PostOptions, source: str) -> str:
             f"{machine.pole.cone:g} deg")
 
 
+@contextlib.contextmanager
+def _spool(output: str | os.PathLike[str] | None) -> Iterator[IO[str]]:
+    """A nameless temporary file for the program's blocks until the header is known: beside a
+    regular output (on its disk, which needs the room anyway), else in the temporary folder.
+    Its write errors are the output's."""
+    target = None if output is None else os.path.realpath(output)
+    folder = os.path.dirname(target) if target and (os.path.isfile(target) or not os.path.exists(target)) else None
+    if folder is not None and not os.access(folder, os.W_OK | os.X_OK):
+        folder = None
+    try:
+        with tempfile.TemporaryFile("w+", encoding="ascii", newline="\n", dir=folder) as handle:
+            yield handle
+    except OSError as error:
+        raise OutputError(f"cannot write: {error.strerror or error}", str(output)) from None
+
+
 class _Clock:
     """Seconds per stage, summed over the parts; each lap is reported to ``progress``."""
 
@@ -547,11 +569,12 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     def plan(found: list[Violation]) -> bool:
         return options.plan and not failed and not found
 
-    with tempfile.TemporaryFile("w+", encoding="ascii", newline="\n") as spool:
+    with _spool(output) as spool:
         for k, part in enumerate(_parts(machine, poses, options, part_poses, clock.lap, plan)):
             failed = failed or bool(part.checks or part.others or part.timing)
-            checks += part.checks
-            others += part.others
+            if len(checks) + len(others) < MAX_VIOLATIONS:  # a program wrong everywhere: enough to say so
+                checks += part.checks
+                others += part.others
             timing += part.timing
             figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, part.duration,
                         part.schedule, timing_figures, part.context)
