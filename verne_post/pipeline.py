@@ -4,12 +4,18 @@ parse CL -> machine poses -> IK and branch choice -> linearisation -> checks -> 
 writer. Each stage is its own module; this one wires them and keeps the statistics.
 
 A long program goes through the stages after parsing a *part* at a time (:func:`post`), so
-that memory follows the largest part, not the program. A part starts at a rapid, where the
-machine stops anyway: the feed planning of a sequence never crosses one, the angle pair is
-chosen afresh there, and what carries across (the rotary's continuity, the last block for
-the moving checks, the rapid's timing and the verification) is handed on explicitly, so the
-program is the same however it is split. The report's figures are gathered part by part
-(:class:`Figures`). :func:`postprocess` runs the whole program as one part and keeps its arrays.
+that memory follows the largest part, not the program. A part ends where the machine stops
+anyway: at a rapid, or where a feed sequence starts (the planner plans each from rest to rest),
+so its timing is the same. What the other stages carry across is handed on explicitly: the
+angle pair of each run is chosen over the whole program before the parts are solved (a
+pre-pass keeping two angles and a status per pose), the rotary's continuity and the pole
+cone's interpolation continue from the part before (:class:`~verne_post.branch.BranchState`),
+the feed move into a part is linearised from the part before's last pose, the checks and the
+timing of the move into a part start from its last block, and the verification reads on from
+where it stood. The program is the same however it is split (tests/test_parts.py). The
+report's figures are gathered part by part (:class:`Figures`); the G-code waits in a
+temporary file until the header's figures are known. :func:`postprocess` runs the whole
+program as one part and keeps its arrays (the HTML report and the timed CSV use them).
 """
 
 from __future__ import annotations
