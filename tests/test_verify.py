@@ -230,15 +230,15 @@ def test_program_cut_off_before_m30(program_text: list[str], tmp_path: Path) -> 
 
 def test_failed_verification_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A writer that put a wrong number in the text: the post run stops with exit 3, no file."""
-    import verne_post.pipeline as pipeline
+    from verne_post.gcode import GcodeWriter
 
-    real = pipeline.program_text
+    real = GcodeWriter.body
 
-    def corrupted(*args: object) -> str:
-        text = real(*args)
-        return re.sub(r"^(G1 X)(\d+)", lambda m: m.group(1) + str(int(m.group(2)) + 1), text, count=1, flags=re.M)
+    def corrupted(*args: object) -> list[str]:
+        text = "".join(real(*args))
+        return [re.sub(r"^(G1 X)(\d+)", lambda m: m.group(1) + str(int(m.group(2)) + 1), text, count=1, flags=re.M)]
 
-    monkeypatch.setattr(pipeline, "program_text", corrupted)
+    monkeypatch.setattr(GcodeWriter, "body", corrupted)
     target = tmp_path / "part.nc"
     result = CliRunner().invoke(main, [str(EXAMPLES / "nx_swarf_inch_crlf.cls"), "-o", str(target), "--quiet"])
     assert result.exit_code == 3

@@ -184,6 +184,7 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
     the feed planning in this process, and the output read back with its batch hash. Bad input,
     violations and failures come back as a status and message, never raised.
     """
+    from .pipeline import post as post_program
     from .pipeline import postprocess, write_output
 
     start = time.perf_counter()
@@ -213,8 +214,19 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
         try:
             loaded = load_machine(machine_path)
             post = replace(options.post, workers=1)  # the batch runs files side by side: one process each
-            result = postprocess(source, loaded, post, progress=lambda stage: _report(stages, name, stage))
-            figures.update(cl_points=len(result.poses), blocks=len(result.blocks.joints),
+            target = Path(folder) / ("out" + options.suffix)
+
+            def progress(stage: str) -> None:
+                _report(stages, name, stage)
+
+            if options.output_format == "gcode":  # a part of the program at a time
+                result = post_program(source, loaded, post, target, verify=options.verify,
+                                      timing_figures=options.report, progress=progress)
+                blocks, cycle_time, verification = result.figures.blocks, result.figures.time, result.verification
+            else:
+                result = postprocess(source, loaded, post, progress=progress)
+                blocks, cycle_time = len(result.blocks.joints), float(result.duration.sum())
+            figures.update(cl_points=len(result.poses), blocks=blocks,
                            tools=tuple(t.number for t in result.poses.tools))
             report = result.report(loaded, post) if options.report else None
             if result.violations:
@@ -222,9 +234,9 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
                 figures["line"] = first.line
                 count = f" (and {len(result.violations) - 1} more)" if len(result.violations) > 1 else ""
                 return outcome("violations", f"{name}:{first.line}: {first.message}{count}", report=report)
-            target = Path(folder) / ("out" + options.suffix)
-            verification = write_output(result, loaded, post, target, options.output_format, options.period,
-                                        verify=options.verify, decimals=options.decimals)
+            if options.output_format != "gcode":
+                verification = write_output(result, loaded, post, target, options.output_format, options.period,
+                                            verify=options.verify, decimals=options.decimals)
             if verification is not None and not verification.ok:
                 finding = verification.findings[0]
                 figures["line"] = finding.cl_line
@@ -232,7 +244,7 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
                 return outcome("violations", f"{where}: the program fails its verification at its line "
                                              f"{finding.line}: {finding.message}", report=report)
             output = target.read_bytes()
-            figures["cycle_time_s"] = float(result.duration.sum())  # as the G-code header says
+            figures["cycle_time_s"] = cycle_time  # as the G-code header says
             if options.output_format == "gcode":
                 digest = input_hash(name, data, machine or MachineFile.read(None), options)
                 output = with_header_line(output.decode("ascii"), f"BATCH HASH {digest}").encode("ascii")

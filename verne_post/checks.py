@@ -89,11 +89,11 @@ def _near_threshold(machine: Machine, found: Margins) -> np.ndarray:
 
 
 def motion_samples(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray,
-                   lines: np.ndarray, every_feed_block: bool = False) -> MotionSamples:
-    """Poses on the joint-space line into each block: rapids at k/8, feed blocks at 1/2 (all of
-    them with ``every_feed_block``, else those with an end near a threshold)."""
+                   lines: np.ndarray, every_feed_block: bool = False, first: int = 1) -> MotionSamples:
+    """Poses on the joint-space line into each block from ``first`` on: rapids at k/8, feed blocks
+    at 1/2 (all of them with ``every_feed_block``, else those with an end near a threshold)."""
     joints = blocks.joints
-    into = np.arange(1, len(joints))
+    into = np.arange(max(first, 1), len(joints))
     near = _near_threshold(machine, blocks.margins)
     feed = ~rapid[into] & (tool_length[into] == tool_length[into - 1])
     if not every_feed_block:
@@ -111,10 +111,16 @@ def motion_samples(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_l
 
 
 def check_program(machine: Machine, blocks: IKResult, rapid: np.ndarray, tool_length: np.ndarray, lines: np.ndarray,
-                  limit: int = 10_000) -> list[Violation]:
-    """All violations at block ends and along the motion, sorted by line, ``limit`` at most each."""
-    at_ends = pose_violations(machine, blocks.joints, blocks.status, blocks.margins, lines, limit=limit)
-    samples = motion_samples(machine, blocks, rapid, tool_length, lines)
+                  limit: int = 10_000, context: int = 0) -> list[Violation]:
+    """All violations at block ends and along the motion, sorted by line, ``limit`` at most each.
+
+    The first ``context`` blocks were checked before (with the blocks before them): only the
+    motion from the last of them is.
+    """
+    ends = slice(context, None)
+    at_ends = pose_violations(machine, blocks.joints[ends], blocks.status[ends], blocks.rows(ends).margins,
+                              lines[ends], limit=limit)
+    samples = motion_samples(machine, blocks, rapid, tool_length, lines, first=context)
     along = pose_violations(machine, samples.joints, samples.status, samples.margins, samples.lines,
                             where="on the way to this point: ", limit=limit)
     unique: dict[tuple[int, str], Violation] = {}

@@ -468,6 +468,28 @@ def _run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing
     return machine, options, result
 
 
+def _run_post(cl_file: str, output: str | None, verify: bool, report_path: str | None, max_messages: int,
+              machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
+    """Load the machine and run every stage a part of the program at a time, writing ``output``
+    (None: only check) after the warnings, violations and report (:func:`_finish`); a progress
+    bar over the parts on a terminal."""
+    from .pipeline import post
+
+    options = _options_from(no_timing, auto_offset, **choices)
+    machine = load_machine(machine_path)
+    stream = sys.stderr if not quiet and sys.stderr.isatty() else io.StringIO()
+    with click.progressbar(length=1, label="verne-post", file=stream) as bar:
+        def progress(stage: str) -> None:  # "pose K of N" after each part
+            if stage.startswith("pose "):
+                done, total = map(int, stage.split()[1::2])
+                bar.length = total
+                bar.update(done - bar.pos)
+
+        return post(cl_file, machine, options, output, verify=verify, timing_figures=bool(report_path),
+                    progress=progress, before_writing=lambda posted: _finish(machine, options, posted, report_path,
+                                                                             quiet, max_messages))
+
+
 #: About how many progress calls a placement makes (the bar stops short of the end until done).
 PLACEMENT_STEPS = 30
 
@@ -488,6 +510,11 @@ def _progress(steps: int, quiet: bool) -> Iterator[Callable[[], None]]:
         bar.update(steps - done)
 
 
+def _html(report_path: str | None) -> bool:
+    """The report is the HTML page (it plots whole-program arrays: the program is posted at once)."""
+    return bool(report_path) and report_path.lower().endswith((".html", ".htm"))
+
+
 def _finish(machine: Machine, options: Any, result: Any, report_path: str | None, quiet: bool,
             max_messages: int) -> None:
     from .tables import write_json
@@ -502,7 +529,7 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
     if len(result.violations) > max_messages:
         click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
     # the report after the violations: they are printed even when the report cannot be written
-    if report_path and report_path.lower().endswith((".html", ".htm")):
+    if _html(report_path):
         from .report_html import write_html_report
 
         write_html_report(report_path, machine, options, result)
@@ -533,6 +560,13 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
     if as_csv and choices["no_timing"]:
         raise InputError("a timed CSV needs the time-parametrisation: drop --no-timing")
     _check_outputs(cl_file, target, report_path)
+    if not as_csv and not _html(report_path):  # G-code: a part of the program at a time
+        posted = _run_post(cl_file, target, not no_verify, report_path, max_messages, **choices)
+        if posted.verification is not None and not posted.verification.ok:
+            _print_findings(posted.verification, max_messages)
+            click.echo(f"verne-post: {target}: the program fails its verification: nothing written", err=True)
+            sys.exit(3)
+        return
     machine, options, result = _run_pipeline(cl_file, **choices)
     _finish(machine, options, result, report_path, choices["quiet"], max_messages)
     verification = write_output(result, machine, options, target, "csv" if as_csv else "gcode", period,
@@ -549,12 +583,15 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
 def check_command(cl_file: str, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
     _check_outputs(cl_file, report_path)
-    machine, options, result = _run_pipeline(cl_file, **choices)
-    _finish(machine, options, result, report_path, choices["quiet"], max_messages)
+    if _html(report_path):
+        machine, options, result = _run_pipeline(cl_file, **choices)
+        figures = result.figures(machine, timing=False)
+        _finish(machine, options, result, report_path, choices["quiet"], max_messages)
+    else:
+        figures = _run_post(cl_file, None, False, report_path, max_messages, **choices).figures
     if not choices["quiet"]:
-        click.echo(f"verne-post: {cl_file}: ok ({len(result.blocks.joints)} blocks, "
-                   f"{int(np.sum(result.blocks.fraction < 1))} inserted, cycle time "
-                   f"{np.sum(result.duration):.1f} s)", err=True)
+        click.echo(f"verne-post: {cl_file}: ok ({figures.blocks} blocks, {figures.inserted} inserted, cycle time "
+                   f"{figures.time:.1f} s)", err=True)
 
 
 @main.command("batch")

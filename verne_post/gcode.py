@@ -30,6 +30,7 @@ Output is deterministic (no dates). Checked against LinuxCNC's interpreter (``ve
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 import unicodedata
@@ -48,6 +49,7 @@ __all__ = [
     "PREAMBLE",
     "FeedRateError",
     "GcodeFormat",
+    "GcodeWriter",
     "Program",
     "comment_text",
     "format_program",
@@ -356,75 +358,114 @@ def _prepare(program: Program, fmt: GcodeFormat) -> tuple[np.ndarray, np.ndarray
     return out, rapid, f_scaled, line
 
 
-def _pieces(program: Program, fmt: GcodeFormat) -> Iterator[str]:
-    """Validate now, then return a generator of text pieces, each one or more ``\\n``-ended lines."""
-    joints, rapid, f_scaled, _ = _prepare(program, fmt)
-    m = joints.shape[0]
-    numbered = fmt.block_numbers
-    step = int(fmt.block_number_step)
+class GcodeWriter:
+    """The G-code of a program a piece at a time: :meth:`head`, then :meth:`body` of one part of the
+    blocks after another, then :meth:`tail`. The writer carries what runs across parts: the
+    block numbers and whether ``G93`` was written, so the text is the same however the blocks
+    are split. A whole :class:`Program` is one part (:func:`program_text`)."""
 
-    # Non-motion lines in output order, grouped by the block they precede: events in source order
-    # (stable sort by index), then G93 just before the first feed block.
-    groups: dict[int, list[tuple[str, bool]]] = {}
-    for ev in sorted(program.events, key=lambda e: int(e.index)):
-        groups.setdefault(int(ev.index), []).extend(_event_lines(ev, program, fmt))
-    feed_idx = np.flatnonzero(~rapid)
-    if feed_idx.size:
-        groups.setdefault(int(feed_idx[0]), []).append(("G93", True))
-    tail = groups.pop(m, [])
-    tail = [*tail, ("M5 M9", True), ("G94", True), ("M30", True)]
+    def __init__(self, fmt: GcodeFormat | None = None) -> None:
+        self.fmt = fmt or GcodeFormat()
+        _check_format(self.fmt)
+        self.numbered = 0  # numbered lines so far: the next one gets N (numbered + 1) * step
+        self.inverse_time = False  # G93 written
 
-    head: list[tuple[str, bool]] = [("%", False)]
-    if program.part_name is not None:
-        name = comment_text(f"PART {program.part_name}")
-        head.append((f"({name})", False))
-    head.extend((f"({comment_text(h)})", False) for h in program.header if comment_text(h))
-    head.append((PREAMBLE, True))
-    n_head = sum(1 for _, is_block in head if is_block)
-
-    # Block numbers: the k-th numbered line overall gets N = k * step. A motion block i is
-    # preceded by n_head preamble lines, i motion blocks and extra[i] numbered event lines.
-    counts = np.zeros(m + 1, dtype=np.int64)
-    for idx, lines in groups.items():
-        counts[idx] = sum(1 for _, is_block in lines if is_block)
-    extra = np.cumsum(counts)  # extra[i]: numbered event lines at indices <= i
-
-    def render(lines: list[tuple[str, bool]], first_number: int) -> str:
+    def _render(self, lines: list[tuple[str, bool]]) -> str:
         out = []
-        k = first_number
+        step = int(self.fmt.block_number_step)
         for text, is_block in lines:
-            if numbered and is_block:
-                out.append(f"N{k * step} {text}\n")
-                k += 1
+            if self.fmt.block_numbers and is_block:
+                self.numbered += 1
+                out.append(f"N{self.numbered * step} {text}\n")
             else:
                 out.append(text + "\n")
         return "".join(out)
 
-    def generate() -> Iterator[str]:
-        yield render(head, 1)
-        events_at = sorted(groups)
-        e = 0
-        for c0 in range(0, m, _CHUNK):
-            c1 = min(c0 + _CHUNK, m)
-            numbers = None
-            if numbered:
-                i = np.arange(c0, c1, dtype=np.int64)
-                numbers = (n_head + extra[c0:c1] + i + 1) * step
-            text, off = _motion_text(joints[c0:c1], rapid[c0:c1], f_scaled[c0:c1], numbers, fmt)
-            prev = c0
-            while e < len(events_at) and events_at[e] < c1:
-                idx = events_at[e]
-                if idx > prev:
-                    yield text[off[prev - c0] : off[idx - c0]]
-                before = int(extra[idx - 1]) if idx > 0 else 0
-                yield render(groups[idx], n_head + before + idx + 1)
-                prev = idx
-                e += 1
-            if c1 > prev:
-                yield text[off[prev - c0] : off[c1 - c0]]
-        yield render(tail, n_head + int(extra[m - 1] if m else 0) + m + 1) + "%\n"
+    def head(self, program: Program) -> str:
+        """``%``, the part name and the ``header`` of ``program`` as comments, the preamble."""
+        head: list[tuple[str, bool]] = [("%", False)]
+        if program.part_name is not None:
+            head.append((f"({comment_text(f'PART {program.part_name}')})", False))
+        head.extend((f"({comment_text(h)})", False) for h in program.header if comment_text(h))
+        head.append((PREAMBLE, True))
+        return self._render(head)
 
-    return generate()
+    def tail(self) -> str:
+        """The end of the program (the same text however often asked for)."""
+        numbered = self.numbered
+        text = self._render([("M5 M9", True), ("G94", True), ("M30", True)]) + "%\n"
+        self.numbered = numbered
+        return text
+
+    def body(self, program: Program) -> Iterator[str]:
+        """Validate the blocks of ``program`` (one part of a program) now, then return a generator
+        of text pieces, each one or more ``\\n``-ended lines; events at index M (after the part's
+        last block) come last."""
+        joints, rapid, f_scaled, _ = _prepare(program, self.fmt)
+        fmt = self.fmt
+        m = joints.shape[0]
+        step = int(fmt.block_number_step)
+        # Non-motion lines in output order, grouped by the block they precede: events in source
+        # order (stable sort by index), then G93 just before the first feed block of the program.
+        groups: dict[int, list[tuple[str, bool]]] = {}
+        for ev in sorted(program.events, key=lambda e: int(e.index)):
+            groups.setdefault(int(ev.index), []).extend(_event_lines(ev, program, fmt))
+        feed_idx = np.flatnonzero(~rapid)
+        if feed_idx.size and not self.inverse_time:
+            groups.setdefault(int(feed_idx[0]), []).append(("G93", True))
+            self.inverse_time = True
+        # Block numbers: a motion block i is preceded by the numbered lines before this part,
+        # i motion blocks and extra[i] numbered event lines of this part.
+        counts = np.zeros(m + 1, dtype=np.int64)
+        for idx, lines in groups.items():
+            counts[idx] = sum(1 for _, is_block in lines if is_block)
+        extra = np.cumsum(counts)  # extra[i]: numbered event lines at indices <= i
+        before = self.numbered
+        self.numbered += m + int(extra[-1]) if fmt.block_numbers else 0
+        events_at = sorted(groups)
+
+        def render(lines: list[tuple[str, bool]], first: int) -> str:
+            out = []
+            for text, is_block in lines:
+                if fmt.block_numbers and is_block:
+                    out.append(f"N{first * step} {text}\n")
+                    first += 1
+                else:
+                    out.append(text + "\n")
+            return "".join(out)
+
+        def generate() -> Iterator[str]:
+            e = 0
+            for c0 in range(0, m, _CHUNK):
+                c1 = min(c0 + _CHUNK, m)
+                numbers = None
+                if fmt.block_numbers:
+                    i = np.arange(c0, c1, dtype=np.int64)
+                    numbers = (before + extra[c0:c1] + i + 1) * step
+                text, off = _motion_text(joints[c0:c1], rapid[c0:c1], f_scaled[c0:c1], numbers, fmt)
+                prev = c0
+                while e < len(events_at) and events_at[e] < c1:
+                    idx = events_at[e]
+                    if idx > prev:
+                        yield text[off[prev - c0] : off[idx - c0]]
+                    yield render(groups[idx], before + (int(extra[idx - 1]) if idx > 0 else 0) + idx + 1)
+                    prev = idx
+                    e += 1
+                if c1 > prev:
+                    yield text[off[prev - c0] : off[c1 - c0]]
+            if e < len(events_at):  # events after the last block
+                yield render(groups[m], before + (int(extra[m - 1]) if m else 0) + m + 1)
+
+        return generate()
+
+
+def _pieces(program: Program, fmt: GcodeFormat) -> Iterator[str]:
+    """Validate now, then return a generator of text pieces, each one or more ``\\n``-ended lines."""
+    writer = GcodeWriter(fmt)
+    head = writer.head(program)
+    body = writer.body(program)
+    tail = writer.tail()
+    return itertools.chain((head,), body, (tail,))
 
 
 def format_program(program: Program, fmt: GcodeFormat | None = None) -> Iterator[str]:

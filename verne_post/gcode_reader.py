@@ -27,7 +27,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["GcodeProgram", "ToolNote", "read_gcode"]
+__all__ = ["GcodeProgram", "ReadState", "ToolNote", "read_gcode"]
 
 AXES = "XYZAC"
 MM_PER_INCH = 25.4
@@ -90,6 +90,7 @@ class GcodeProgram:
     end_line: int | None
     last_line: int
     problems: tuple[tuple[int, str], ...]
+    state: ReadState | None = None  # where the reading stands after this text (to read on: read_gcode)
 
     def __len__(self) -> int:
         return len(self.line)
@@ -123,8 +124,34 @@ class _State:
     tool_length: float = np.nan  # mm, from its TOOL comment
 
 
-def read_gcode(text: str | Iterable[str], source: str = "<program>") -> GcodeProgram:
+@dataclass(frozen=True)
+class ReadState:
+    """Where the reading of a program stands after some of its lines: the next line's number,
+    the modal state, and the last motion mode, position (mm, degrees) and feed given."""
+
+    lines: int  # lines read
+    modal: _State
+    lengths: dict[int, float]  # tool -> length (mm) of the TOOL comments read
+    selected: int  # the tool of the last T word
+    work_offset: tuple[float, float, float] | None
+    tolerance: tuple[float, float] | None
+    opened: bool  # the program starts with '%'
+    end_line: int | None  # M2/M30
+    stop_line: int | None  # M2/M30 or the closing '%': nothing after it runs
+    last_line: int  # the last non-blank line
+    motion: float  # G0 / G1 in force (NaN: none yet)
+    position: np.ndarray  # (5,) X Y Z mm, A C degrees (NaN: never given)
+    feed: float  # the last F word given, within feed-mode epoch ``feed_epoch``
+    feed_epoch: int
+
+
+def read_gcode(text: str | Iterable[str], source: str = "<program>", state: ReadState | None = None,
+               final: bool = True) -> GcodeProgram:
     """Read program text (one string, or its lines) into motion blocks; see the module docstring.
+
+    A long program may be read a part at a time: ``state`` is the ``.state`` of the program read
+    from the text before (whole lines: the text before ends in a newline), and ``final`` False
+    for every part but the last (the end of the program is looked for in the last one).
 
     Lines of only N, G0/G1, X Y Z A C and F words (nearly all of a program) are tokenised and
     their numbers parsed with numpy, all at once; every other line goes word by word through
@@ -135,28 +162,33 @@ def read_gcode(text: str | Iterable[str], source: str = "<program>") -> GcodePro
         text = "\n".join(text)
     text = text.replace("\r\n", "\n").replace("\r", "\n")
     lines = text.split("\n")
+    offset = state.lines if state is not None else 0
+    read = offset + len(lines) - (1 if text.endswith("\n") else 0)
+    if state is not None and state.stop_line is not None:  # the program has ended: nothing more runs
+        return _resolve(source, np.zeros((0, 7)), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                        _Interpreter(source, 0, state), [], state.last_line, read, state)
     fast_line, fast_rows, blank, slow = _fast_rows(np.frombuffer(text.encode("utf-8", "replace"), np.uint8),
                                                    len(lines))
     first = int(np.argmax(~blank)) if (~blank).any() else len(lines)
-    reader = _Interpreter(source, opened_at=first)
+    reader = _Interpreter(source, -1 if state is not None else first, state)
     for k in np.flatnonzero(slow):
-        if not reader.read(int(k) + 1, lines[k]):
+        if not reader.read(offset + int(k) + 1, lines[k]):
             break
-    stop = reader.stop_line or len(lines)
-    keep = fast_line + 1 <= stop
-    line = np.concatenate([fast_line[keep] + 1, np.asarray(reader.row_line, dtype=np.int64)])
+    stop = reader.stop_line or offset + len(lines)
+    keep = offset + fast_line + 1 <= stop
+    line = np.concatenate([offset + fast_line[keep] + 1, np.asarray(reader.row_line, dtype=np.int64)])
     table = np.concatenate([fast_rows[keep], np.asarray(reader.rows, dtype=float).reshape(-1, 7)])
     order = np.argsort(line, kind="stable")
     line, table = line[order], table[order]
     # the state of a block is the one left by the last word-by-word line before it
     changes = np.asarray(reader.change_line, dtype=np.int64)
-    state = np.searchsorted(changes, line, side="right")
-    nonblank = np.flatnonzero(~blank[:stop])
-    last_line = int(nonblank[-1]) + 1 if nonblank.size else 0
+    rows_state = np.searchsorted(changes, line, side="right")
+    nonblank = np.flatnonzero(~blank[:stop - offset])
+    last_line = offset + int(nonblank[-1]) + 1 if nonblank.size else state.last_line if state is not None else 0
     problems = []
-    if reader.end_line is None and reader.opened and not reader.closed:
+    if final and reader.end_line is None and reader.opened and not reader.closed:
         problems.append((last_line, "the program starts with '%' but has no closing '%'"))
-    return _resolve(source, table, line, state, reader, problems, last_line)
+    return _resolve(source, table, line, rows_state, reader, problems, last_line, read, state)
 
 
 def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -214,21 +246,22 @@ class _Interpreter:
     (M2/M30, or a closing '%'). ``states[i]`` is the modal state after ``change_line[i - 1]``.
     """
 
-    def __init__(self, source: str, opened_at: int) -> None:
+    def __init__(self, source: str, opened_at: int, state: ReadState | None = None) -> None:
         self.source = source
         self.first_line = opened_at + 1
         self.rows: list[list[float]] = []
         self.row_line: list[int] = []
-        self.states: list[_State] = [_State()]
+        self.states: list[_State] = [_State() if state is None else state.modal]
         self.change_line: list[int] = []
         self.notes: list[ToolNote] = []
-        self.lengths: dict[int, float] = {}
-        self.selected = -1
-        self.work_offset: tuple[float, float, float] | None = None
-        self.tolerance: tuple[float, float] | None = None
-        self.end_line: int | None = None
-        self.stop_line: int | None = None
-        self.opened = self.closed = False
+        self.lengths: dict[int, float] = {} if state is None else dict(state.lengths)
+        self.selected = -1 if state is None else state.selected
+        self.work_offset: tuple[float, float, float] | None = None if state is None else state.work_offset
+        self.tolerance: tuple[float, float] | None = None if state is None else state.tolerance
+        self.end_line: int | None = None if state is None else state.end_line
+        self.stop_line: int | None = None if state is None else state.stop_line
+        self.opened = state is not None and state.opened
+        self.closed = False
 
     def fail(self, number: int, reason: str) -> InputError:
         return InputError(reason, self.source, number)
@@ -319,18 +352,22 @@ class _Interpreter:
 
 
 def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray, reader: _Interpreter,
-             problems: list[tuple[int, str]], last_line: int) -> GcodeProgram:
+             problems: list[tuple[int, str]], last_line: int, read: int, before: ReadState | None) -> GcodeProgram:
     """Modal positions, motion modes and feeds of all rows at once (``state``: index into
-    ``reader.states`` per row); keep the moves."""
-    n = len(table)
+    ``reader.states`` per row; ``before``: the reading of the text before); keep the moves."""
+    # Row 0: what was given before this text (mm and degrees already), so that modal values carry on.
+    given = np.full(7, np.nan) if before is None else np.r_[before.motion, before.position, before.feed]
+    table, line, state = np.r_[given[None], table], np.r_[0, line], np.r_[0, state]
 
     def of_state(name: str, dtype: type) -> np.ndarray:
         return np.array([getattr(s, name) for s in reader.states], dtype=dtype)[state]
 
     scale, inverse_time, epoch = of_state("scale", float), of_state("inverse_time", bool), of_state("feed_epoch", int)
-    everywhere = np.zeros(n, np.int64)
+    scale[0], epoch[0] = 1.0, -1 if before is None else before.feed_epoch
+    everywhere = np.zeros(len(table), np.int64)
     axes = np.any(~np.isnan(table[:, 1:6]), axis=1)
     moves = axes | ~np.isnan(table[:, 0])  # a G0/G1 word alone is a move of length zero (as LinuxCNC does)
+    moves[0] = False
     motion = _last_given(table[:, 0], everywhere)
     orphan = axes & np.isnan(motion)
     if orphan.any():
@@ -339,7 +376,8 @@ def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray
     position[:, :3] *= scale[:, None]
     position = np.column_stack([_last_given(position[:, k], everywhere) for k in range(5)])
     # G93: the F word is not modal; G94: the last F since the last G93/G94 word.
-    feed = np.where(inverse_time, table[:, 6], _last_given(table[:, 6], epoch))
+    given_feed = _last_given(table[:, 6], epoch)
+    feed = np.where(inverse_time, table[:, 6], given_feed)
     rapid = motion == 0
     feed[rapid] = np.nan
     keep = np.flatnonzero(moves)
@@ -348,14 +386,17 @@ def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray
                          "G1 with no feed rate (no F since the start or since G94)" if np.isnan(feed[k]) else
                          f"G1 with feed rate F{feed[k]:g}"))
     joints = position[keep]
-    duration = _durations(joints, scale[keep], rapid[keep], inverse_time[keep], feed[keep])
+    duration = _durations(joints, scale[keep], rapid[keep], inverse_time[keep], feed[keep], position[0])
     joints[:, 3:] = np.radians(joints[:, 3:])
+    after = ReadState(read, reader.states[-1], reader.lengths, reader.selected, reader.work_offset,
+                      reader.tolerance, reader.opened, reader.end_line, reader.stop_line, last_line, motion[-1],
+                      position[-1], given_feed[-1], int(epoch[-1]))
     return GcodeProgram(
         source=source, joints=joints, rapid=rapid[keep], inverse_time=inverse_time[keep], feed=feed[keep],
         duration=duration, line=line[keep], tool=of_state("tool", int)[keep],
         tool_length=of_state("tool_length", float)[keep], tool_notes=tuple(reader.notes),
         work_offset=reader.work_offset, tolerance=reader.tolerance, end_line=reader.end_line, last_line=last_line,
-        problems=tuple(sorted(problems)),
+        problems=tuple(sorted(problems)), state=after,
     )
 
 
@@ -369,9 +410,10 @@ def _last_given(values: np.ndarray, group: np.ndarray) -> np.ndarray:
 
 
 def _durations(position: np.ndarray, scale: np.ndarray, rapid: np.ndarray, inverse_time: np.ndarray,
-               feed: np.ndarray) -> np.ndarray:
-    """Seconds of each G1 block (positions mm / deg, F as programmed in units of ``scale`` mm)."""
-    step = np.diff(position, axis=0, prepend=np.full((1, 5), np.nan))
+               feed: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """Seconds of each G1 block (positions mm / deg, F as programmed in units of ``scale`` mm;
+    ``start``: the position before the first, NaN where unknown)."""
+    step = np.diff(position, axis=0, prepend=start[None])
     linear = np.linalg.norm(step[:, :3], axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         per_minute = np.where(np.any(step[:, :3] != 0, axis=1), linear / (feed * scale),

@@ -9,7 +9,7 @@ the program at once, level by level. Units: mm, rad; table frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -86,10 +86,20 @@ class Blocks:
     def joints(self) -> np.ndarray:
         return self.result.joints
 
-    def rows(self, index: np.ndarray) -> Blocks:
+    def rows(self, index: np.ndarray | slice) -> Blocks:
         """The blocks ``index`` (in that order)."""
         return Blocks(self.tip[index], self.axis[index], self.pose[index], self.fraction[index],
                       self.result.rows(index), self.unresolved)
+
+    def then(self, other: Blocks) -> Blocks:
+        """These blocks, then those of ``other``."""
+        return Blocks(np.concatenate([self.tip, other.tip]), np.concatenate([self.axis, other.axis]),
+                      np.concatenate([self.pose, other.pose]), np.concatenate([self.fraction, other.fraction]),
+                      concatenate([self.result, other.result]), np.concatenate([self.unresolved, other.unresolved]))
+
+    def shifted(self, first: int) -> Blocks:
+        """The blocks of poses counted from ``first`` (a part of a program), counted from 0."""
+        return replace(self, pose=self.pose + first, unresolved=self.unresolved + first)
 
 
 def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray, tip1: np.ndarray,

@@ -2,38 +2,55 @@
 
 parse CL -> machine poses -> IK and branch choice -> linearisation -> checks -> durations ->
 writer. Each stage is its own module; this one wires them and keeps the statistics.
+
+A long program goes through the stages after parsing a *part* at a time (:func:`post`), so
+that memory follows the largest part, not the program. A part ends where the machine stops
+anyway: at a rapid, or where a feed sequence starts (the planner plans each from rest to rest),
+so its timing is the same. What the other stages carry across is handed on explicitly: the
+angle pair of each run is chosen over the whole program before the parts are solved (a
+pre-pass keeping two angles and a status per pose), the rotary's continuity and the pole
+cone's interpolation continue from the part before (:class:`~verne_post.branch.BranchState`),
+the feed move into a part is linearised from the part before's last pose, the checks and the
+timing of the move into a part start from its last block, and the verification reads on from
+where it stood. The program is the same however it is split (tests/test_parts.py). The
+report's figures are gathered part by part (:class:`Figures`); the G-code waits in a
+temporary file until the header's figures are known. :func:`postprocess` runs the whole
+program as one part and keeps its arrays (the HTML report and the timed CSV use them).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import shutil
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
 from . import __version__
-from .api import JOINT_NAMES
-from .branch import PathIK, solve_path
+from .api import JOINT_NAMES, joint_bounds
+from .atomic import atomic_write
+from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
-from .gcode import GcodeFormat, Program, program_text, with_header_line, write_program, write_text
+from .errors import OutputError
+from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
-from .toolpath import Dwell, ToolChange
+from .schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
+from .timing import Limits
+from .toolpath import Dwell, Event, ToolChange
 from .topp import Engine
-from .verify import Reference, Verification, verify_program
+from .verify import Reference, Verification, Verifier, verify_program
 
 if TYPE_CHECKING:
     from .placement import Placement
-    from .schedule import Schedule
-
-# The planner (verne_post.schedule, verne_post.timing) is imported where it is used: with
-# toppra it takes about a second to load, which 'place' (check_poses only) does not need.
 
 
 @dataclass(frozen=True)
@@ -54,9 +71,123 @@ class PostOptions:
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
 
+_MARGINS = ("serial", "parallel", "machine", "rod_clearance")
+
+
+@dataclass
+class Figures:
+    """The report's figures of a program's blocks, gathered a part at a time (:meth:`add`): mm,
+    rad inside, seconds. The timing figures only where every part was planned."""
+
+    blocks: int = 0
+    inserted: int = 0
+    in_pole_cone: int = 0
+    cone_deviation: float = 0.0  # rad: largest axis deviation in the pole cone
+    low: np.ndarray = field(default_factory=lambda: np.full(5, np.inf))  # joint ranges (finite blocks)
+    high: np.ndarray = field(default_factory=lambda: np.full(5, -np.inf))
+    margins: dict[str, float] = field(default_factory=lambda: dict.fromkeys(_MARGINS, np.inf))
+    feed_length: float = 0.0
+    rapid_length: float = 0.0
+    time: float = 0.0  # s: sum of the block durations
+    rapid_time: float = 0.0
+    time_per_tool: dict[int, float] = field(default_factory=dict)
+    planned: bool = True  # every part has a schedule
+    budget: dict[str, float] = field(default_factory=dict)
+    ratios: np.ndarray = field(default_factory=lambda: np.zeros((3, 5)))  # velocity, acceleration, jerk / limit
+
+    def add(self, machine: Machine, poses: MachinePoses, path: PathIK, first: int, blocks: Blocks, rapid: np.ndarray,
+            duration: np.ndarray, schedule: Schedule | None, timing: bool, context: int = 0) -> None:
+        """Add the figures of a part: the path of poses ``first``... and its blocks; the first
+        ``context`` blocks belong to the part before (the motion from there counts);
+        ``timing``: also the planner's figures (time budget, ratios to the limits)."""
+        own = slice(context, None)
+        joints = blocks.joints[own]
+        finite = joints[np.all(np.isfinite(joints), axis=1)]
+        if len(finite):
+            self.low, self.high = np.fmin(self.low, finite.min(axis=0)), np.fmax(self.high, finite.max(axis=0))
+        self.blocks += len(joints)
+        self.inserted += int(np.sum(blocks.fraction[own] < 1))
+        self.in_pole_cone += int(path.in_cone.sum())
+        axis = poses.axis[first:first + len(path.axis)]
+        self.cone_deviation = max(self.cone_deviation, float(np.max(
+            2 * np.arcsin(np.linalg.norm(path.axis - axis, axis=1) / 2), initial=0.0)))
+        for name in _MARGINS:
+            self.margins[name] = float(np.fmin(self.margins[name], np.nanmin(
+                getattr(blocks.result.margins, name)[own], initial=np.inf)))
+        step = np.linalg.norm(np.diff(blocks.tip, axis=0), axis=1)
+        self.feed_length += float(np.sum(step[~rapid[1:]]))
+        self.rapid_length += float(np.sum(step[rapid[1:]]))
+        own_duration, own_rapid = duration[own], rapid[own]
+        self.time += float(np.sum(own_duration))
+        self.rapid_time += float(np.sum(own_duration[own_rapid]))
+        tools = poses.tool[blocks.pose[own]]
+        for tool in np.unique(tools):
+            self.time_per_tool[int(tool)] = self.time_per_tool.get(int(tool), 0.0) + float(
+                np.sum(own_duration[tools == tool]))
+        self.planned &= schedule is not None
+        if schedule is not None and timing:
+            limits = Limits.from_machine(machine)
+            self.ratios = np.maximum(self.ratios, limit_ratios(schedule, limits))
+            speed = feed_speed(poses, blocks, duration)
+            budget = time_budget(schedule, blocks.joints, blocks.tip, speed, limits,
+                                 np.radians(machine.timing.rotary_feed) / 60.0)
+            for name, value in budget.items():
+                self.budget[name] = self.budget.get(name, 0.0) + value
+
+
+def _finite(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
+def _report(machine: Machine, options: PostOptions, poses: MachinePoses, violations: list[Violation],
+            warnings: list[str], figures: Figures, placement: Placement | None, seconds: dict[str, float]
+            ) -> dict[str, Any]:
+    """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
+    scale = np.array([1.0, 1.0, 1.0, 180 / np.pi, 180 / np.pi])
+    ranges = {name: [float(figures.low[j] * scale[j]), float(figures.high[j] * scale[j])]
+              if figures.low[j] <= figures.high[j] else None for j, name in enumerate(JOINT_NAMES)}
+    timing = None
+    if figures.planned and figures.blocks:
+        dwell = sum(e.seconds for e in poses.events if isinstance(e, Dwell))
+        timing = {
+            "cycle_time_s": figures.time + dwell,
+            "dwell_time_s": dwell,
+            "rapid_time_s": figures.rapid_time,
+            **figures.budget,
+            "time_per_tool_s": {str(t): figures.time_per_tool[t] for t in sorted(figures.time_per_tool)},
+            "largest_ratio_to_limit": {name: dict(zip(("velocity", "acceleration", "jerk"),
+                                                      map(float, figures.ratios[:, j]), strict=True))
+                                       for j, name in enumerate(JOINT_NAMES)},
+        }
+    return {
+        "source": poses.source,
+        "dialect": poses.dialect,
+        "machine": machine.source,
+        "verne_post": __version__,
+        "ok": not violations,
+        "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in violations],
+        "warnings": warnings,
+        "points": {"cl": len(poses), "inserted": figures.inserted, "blocks": figures.blocks,
+                   "in_pole_cone": figures.in_pole_cone},
+        "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(figures.cone_deviation)),
+        "joint_ranges": ranges,
+        "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
+        "smallest_margins": {name: _finite(figures.margins[name]) for name in _MARGINS},
+        "path_length_mm": {"feed": figures.feed_length, "rapid": figures.rapid_length},
+        "estimated_time_s": figures.time,
+        "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
+        "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
+                   "length_from": t.source} for t in poses.tools],
+        "timing": timing,
+        "work_offset_mm": list(placement.offset if placement else _offset(machine, options)),
+        "placement": None if placement is None else placement.to_dict(),
+        "seconds": seconds,
+    }
+
+
 @dataclass
 class PostResult:
-    """What the pipeline produced; ``program`` is None when there are violations."""
+    """What the pipeline produced for the whole program; ``program`` is None when there are violations."""
 
     poses: MachinePoses
     path: PathIK
@@ -70,72 +201,15 @@ class PostResult:
     seconds: dict[str, float] = field(default_factory=dict)
     placement: Placement | None = None  # how the work offset was chosen (work_offset "auto")
 
+    def figures(self, machine: Machine, timing: bool = True) -> Figures:
+        figures = Figures()
+        figures.add(machine, self.poses, self.path, 0, self.blocks, self.rapid, self.duration, self.schedule, timing)
+        return figures
+
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
-        joints = self.blocks.joints
-        finite = np.all(np.isfinite(joints), axis=1)
-        ranges = {}
-        for j, name in enumerate(JOINT_NAMES):
-            values = joints[finite, j] * (1.0 if j < 3 else 180 / np.pi)
-            ranges[name] = [float(values.min()), float(values.max())] if values.size else None
-        margins = self.blocks.result.margins
-        tips = self.blocks.tip
-        feed_length = float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[~self.rapid[1:]]))
-        return {
-            "source": self.poses.source,
-            "dialect": self.poses.dialect,
-            "machine": machine.source,
-            "verne_post": __version__,
-            "ok": not self.violations,
-            "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in self.violations],
-            "warnings": self.warnings,
-            "points": {"cl": len(self.poses), "inserted": int(np.sum(self.blocks.fraction < 1)), "blocks": len(tips),
-                       "in_pole_cone": int(self.path.in_cone.sum())},
-            "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(np.max(
-                2 * np.arcsin(np.linalg.norm(self.path.axis - self.poses.axis, axis=1) / 2), initial=0.0))),
-            "joint_ranges": ranges,
-            "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
-            "smallest_margins": {name: _nanmin(getattr(margins, name)) for name in
-                                 ("serial", "parallel", "machine", "rod_clearance")},
-            "path_length_mm": {"feed": feed_length,
-                               "rapid": float(np.sum(np.linalg.norm(np.diff(tips, axis=0), axis=1)[self.rapid[1:]]))},
-            "estimated_time_s": float(np.sum(self.duration)),
-            "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
-            "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
-                       "length_from": t.source} for t in self.poses.tools],
-            "timing": self._timing(machine),
-            "work_offset_mm": list(self.placement.offset if self.placement else _offset(machine, options)),
-            "placement": None if self.placement is None else self.placement.to_dict(),
-            "seconds": self.seconds,
-        }
-
-    def _timing(self, machine: Machine) -> dict[str, Any] | None:
-        if self.schedule is None:
-            return None
-        from .schedule import limit_ratios, time_budget
-        from .timing import Limits
-
-        limits = Limits.from_machine(machine)
-        tools = self.poses.tool[self.blocks.pose]
-        ratios = limit_ratios(self.schedule, limits)
-        speed = feed_speed(self.poses, self.blocks, self.duration)
-        budget = time_budget(self.schedule, self.blocks.joints, self.blocks.tip, speed, limits,
-                             np.radians(machine.timing.rotary_feed) / 60.0)
-        dwell = sum(e.seconds for e in self.poses.events if isinstance(e, Dwell))
-        return {
-            "cycle_time_s": self.schedule.total + dwell,
-            "dwell_time_s": dwell,
-            "rapid_time_s": float(np.sum(self.duration[self.rapid])),
-            **budget,
-            "time_per_tool_s": {str(t): float(np.sum(self.duration[tools == t])) for t in np.unique(tools)},
-            "largest_ratio_to_limit": {name: {"velocity": float(ratios[0, j]), "acceleration": float(ratios[1, j]),
-                                              "jerk": float(ratios[2, j])} for j, name in enumerate(JOINT_NAMES)},
-        }
-
-
-def _nanmin(values: np.ndarray) -> float | None:
-    finite = values[np.isfinite(values)]
-    return float(finite.min()) if finite.size else None
+        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures(machine),
+                       self.placement, self.seconds)
 
 
 def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
@@ -145,8 +219,6 @@ def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid
     share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
     rotary-only block is never of zero duration. Rapids: the joint-limit time.
     """
-    from .timing import Limits
-
     step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
     joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
     length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
@@ -189,87 +261,368 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     sorted by line. Placement calls this for each candidate work offset. With ``first_failure``
     the linearisation stops once a block end fails: the violations then show that the program
     fails, not every way it does (placement's room only asks whether it runs)."""
-    cone = np.radians(machine.pole.cone)
-    solved = solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length, cone=cone)
+    solved = _solve(machine, poses, options)
     lap("ik")
-    blocks = linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol), cone=cone,
-                       until_failure=first_failure)
+    blocks = _linearise(machine, poses, options, solved, until_failure=first_failure)
     lap("linearise")
     rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
-    violations = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
-    for k in blocks.unresolved:
-        violations.append(Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
-                                                                f"{options.axis_tol} deg of the CL path"))
-    for k in np.flatnonzero(solved.pair_switch):
-        violations.append(Violation(int(poses.line[k]), "branch", "no single tool-axis angle pair reaches this whole "
-                                                                  "cut: the table would turn half a turn mid-cut"))
-    violations.sort(key=lambda v: (v.line, v.kind))
-    return Checked(solved, blocks, rapid, tuple(violations))
+    checks, others = _checks(machine, poses, options, solved.pair_switch, blocks, rapid)
+    return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
 
 
-def postprocess(path: str | Path, machine: Machine, options: PostOptions,
-                progress: Callable[[str], None] = lambda stage: None) -> PostResult:
-    """Run every stage except writing. Raises InputError for bad input; violations are returned."""
-    seconds: dict[str, float] = {}
-    clock = time.perf_counter()
+def _solve(machine: Machine, poses: MachinePoses, options: PostOptions, state: BranchState | None = None,
+           pairs: Pairs | None = None) -> PathIK:
+    return solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length,
+                      cone=np.radians(machine.pole.cone), state=state, pairs=pairs)
 
-    def lap(stage: str) -> None:
-        nonlocal clock
+
+def _linearise(machine: Machine, poses: MachinePoses, options: PostOptions, solved: PathIK,
+               until_failure: bool = False) -> Blocks:
+    return linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol),
+                     cone=np.radians(machine.pole.cone), until_failure=until_failure)
+
+
+def _checks(machine: Machine, poses: MachinePoses, options: PostOptions, switch: np.ndarray, blocks: Blocks,
+            rapid: np.ndarray, first: int = 0) -> tuple[list[Violation], list[Violation]]:
+    """The violations of blocks (poses indexing ``poses``) and of the angle pair switches of poses
+    ``first``...: those of the checks (one per line and kind) and the others."""
+    checks = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
+    others = [Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
+                                                    f"{options.axis_tol} deg of the CL path")
+              for k in blocks.unresolved]
+    others += [Violation(int(poses.line[first + k]), "branch", "no single tool-axis angle pair reaches this whole "
+                                                               "cut: the table would turn half a turn mid-cut")
+               for k in np.flatnonzero(switch)]
+    return checks, others
+
+
+#: Violations gathered over the parts at most (the checks of one part report at most 10,000
+#: poses of a kind): memory stays bounded when a long program is wrong everywhere.
+MAX_VIOLATIONS = 20_000
+
+#: CL poses per part of a program (:func:`post`): a part ends where the machine stops, at a
+#: rapid or between feed sequences, at the last such place among this many poses.
+PART_POSES = 20_000
+
+
+@dataclass(frozen=True)
+class Part:
+    """Poses ``first`` to ``end - 1`` through stages 3 to 5; ``blocks`` (pose indices of the whole
+    program) without those that move no joint, ``context`` of them (0 or 1) being the last block
+    of the part before, there for the motion from it (``schedule`` counts it too)."""
+
+    first: int
+    end: int
+    path: PathIK
+    blocks: Blocks
+    rapid: np.ndarray
+    duration: np.ndarray  # s
+    schedule: Schedule | None
+    context: int
+    checks: list[Violation]  # stage 3 checks, one per line and kind
+    others: list[Violation]  # paths out of tolerance, angle pair switches
+    timing: list[Violation]
+    warnings: list[str]
+
+    @property
+    def own(self) -> slice:
+        return slice(self.context, None)
+
+
+def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
+    """The angle pairs along the whole program, from both pairs' IK solved ``size`` poses at a
+    time (the choice weighs whole runs: it is made before the parts are solved)."""
+    n = len(poses)
+    plus, minus = (PairAngles(np.empty(n, np.int8), np.empty((n, 2))) for _ in range(2))
+    for first in range(0, n, size):
+        part = poses.part(first, first + size)
+        for out, result in zip((plus, minus), both_pairs(machine, part.tip, part.axis, part.tool_length),
+                               strict=True):
+            out.status[first:first + size], out.angles[first:first + size] = result.status, result.joints[:, 3:]
+    return choose_pairs(plus, minus, poses.sequence, in_pole_cone(poses.axis, np.radians(machine.pole.cone)))
+
+
+def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: PathIK, ext: Blocks,
+         rapid: np.ndarray) -> int | None:
+    """Where the part of poses ``first``... solved up to ``end`` ends: the last place before
+    ``end`` where the machine stops whatever comes after (None: none). ``ext``: the moving
+    blocks from the part before's last, ``rapid`` theirs.
+
+    A rapid, or the first block of a pose that starts a feed sequence (the planner plans each
+    from rest to rest) with its CL line not the pose before's (a record's points, an arc's,
+    stay together) and the pose before off the pole cone with a solution (the cone's theta2 is
+    interpolated between such poses), on a continuous rotary (a limited one is fitted into its
+    range a sequence at a time).
+    """
+    candidates = first + 1 + np.flatnonzero(poses.rapid[first + 1:end])
+    if not np.isfinite(joint_bounds(machine)[0][4]):
+        starts = np.array([a for a, _ in feed_sequences(ext.joints, rapid, poses.sequence[ext.pose],
+                                                        Limits.from_machine(machine),
+                                                        np.radians(machine.timing.corner_angle))], int)
+        starts = starts[starts >= 2]  # the turn into a block weighs the two blocks before it
+        pose = ext.pose[starts]
+        pose = pose[(pose > first) & (pose < end) & (ext.pose[starts - 1] == pose - 1)]  # a pose's first block
+        pose = pose[(poses.line[pose] != poses.line[pose - 1]) & np.isfinite(solved.trace.added[pose - 1 - first])]
+        candidates = np.r_[candidates, pose]
+    return int(candidates.max()) if candidates.size else None
+
+
+def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: int, lap: Callable[[str], None],
+           plan: Callable[[list[Violation]], bool]) -> Iterator[Part]:
+    """Stages 3 to 5 of each part in turn (one part when ``size`` covers the program);
+    ``plan(violations)``: whether to plan the timing of a part with these violations."""
+    n = len(poses)
+    pairs = None if size >= n else _choose_pairs(machine, poses, size)
+    state = BranchState()
+    last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
+    before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
+    first = 0
+    while first < n:
+        end = min(n, first + size)
+        while True:
+            solved = _solve(machine, poses.part(first, end), options, state,
+                            None if pairs is None else pairs.part(first, end))
+            lap("ik")
+            context = int(last is not None and not poses.rapid[first])  # a feed move from the part before
+            blocks = _linearise(machine, poses.part(first - context, end), options,
+                                last.then(solved) if context else solved).shifted(first - context)
+            blocks = blocks.rows(slice(np.searchsorted(blocks.pose, first), None))
+            lap("linearise")
+            rapid = poses.rapid[blocks.pose].copy()
+            rapid[0] |= first == 0  # where the machine stands before the program is unknown: position with G0
+            ext, ext_rapid = (blocks, rapid) if before is None else (before[0].then(blocks), np.r_[before[1], rapid])
+            # Blocks that move no joint (repeated CL points) take no time and are left out.
+            moving = np.flatnonzero(np.r_[True, np.any(np.diff(ext.joints, axis=0) != 0, axis=1)])
+            cut = n if end == n else _cut(machine, poses, first, end, solved, ext.rows(moving), ext_rapid[moving])
+            if cut is not None:
+                break
+            end = min(n, first + 2 * (end - first))
+        k = int(np.searchsorted(blocks.pose, cut))
+        blocks, rapid = blocks.rows(slice(0, k)), rapid[:k]
+        blocks = replace(blocks, unresolved=blocks.unresolved[blocks.unresolved < cut])
+        path = solved.rows(slice(0, cut - first))
+        checks, others = _checks(machine, poses, options, path.pair_switch, blocks, rapid, first)
+        context = 0
+        if before is not None:  # the move into this part, from the last block of the part before
+            blocks, rapid, context = before[0].then(blocks), np.r_[before[1], rapid], 1
+            checks += check_program(machine, blocks.result.rows(slice(0, 2)), rapid[:2],
+                                    poses.tool_length[blocks.pose[:2]], poses.line[blocks.pose[:2]], context=1)
+        warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, poses.line[blocks.pose],
+                                        poses.source)
+        lap("checks")
+        moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
+        blocks, rapid = blocks.rows(moving), rapid[moving]
+        duration = block_durations(machine, poses, blocks, rapid)
+        schedule, timing = None, []
+        if plan(checks + others):
+            try:
+                schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
+                                        poses.sequence[blocks.pose], Limits.from_machine(machine),
+                                        rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
+                                        corner=np.radians(machine.timing.corner_angle), workers=options.workers,
+                                        engine=options.planner)
+                duration = schedule.duration
+            except SequenceError as error:
+                timing.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
+                                        f"cannot plan the feed motion: {error}"))
+            lap("timing")
+        yield Part(first, cut, path, blocks, rapid, duration, schedule, context, checks, others, timing, warnings)
+        state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
+        before = (blocks.rows(slice(-1, None)), bool(rapid[-1]))
+        first = cut
+
+
+def _violations(checks: list[Violation], others: list[Violation], timing: list[Violation],
+                placement: Placement | None) -> list[Violation]:
+    """The violations of the parts as the whole program's checks give them: one per line and kind
+    from the checks, sorted by line, the infeasible placement first, timing last."""
+    unique: dict[tuple[int, str], Violation] = {}
+    for v in checks:
+        unique.setdefault((v.line, v.kind), v)
+    violations = sorted([*unique.values(), *others], key=lambda v: (v.line, v.kind))
+    if placement is not None and not placement.feasible:
+        violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
+                                                                    f"{placement.reason}"))
+    return violations + timing
+
+
+def _cone_warning(machine: Machine, options: PostOptions, source: str) -> str:
+    return (f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the axis "
+            f"tolerance ({options.axis_tol:g} deg): near the table normal the tool axis may be off by up to "
+            f"{machine.pole.cone:g} deg")
+
+
+@contextlib.contextmanager
+def _spool(output: str | os.PathLike[str] | None) -> Iterator[IO[str]]:
+    """A nameless temporary file for the program's blocks until the header is known: beside a
+    regular output (on its disk, which needs the room anyway), else in the temporary folder.
+    Its write errors are the output's."""
+    target = None if output is None else os.path.realpath(output)
+    folder = os.path.dirname(target) if target and (os.path.isfile(target) or not os.path.exists(target)) else None
+    if folder is not None and not os.access(folder, os.W_OK | os.X_OK):
+        folder = None
+    try:
+        with tempfile.TemporaryFile("w+", encoding="ascii", newline="\n", dir=folder) as handle:
+            yield handle
+    except OSError as error:
+        raise OutputError(f"cannot write: {error.strerror or error}", str(output)) from None
+
+
+class _Clock:
+    """Seconds per stage, summed over the parts; each lap is reported to ``progress``."""
+
+    def __init__(self, progress: Callable[[str], None]) -> None:
+        self.seconds: dict[str, float] = {}
+        self.progress = progress
+        self.clock = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
         now = time.perf_counter()
-        seconds[stage] = now - clock
-        clock = now
-        progress(stage)
+        self.seconds[stage] = self.seconds.get(stage, 0.0) + now - self.clock
+        self.clock = now
+        self.progress(stage)
 
+
+def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clock: _Clock
+                   ) -> tuple[MachinePoses, PostOptions, Placement | None]:
+    """Stages 1 and 2: the CL file read, the work offset placed, the poses in the table frame."""
     toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
                              arc_direction=options.arc_direction, frame=options.frame)
-    lap("parse")
+    clock.lap("parse")
     placement = None
     if options.work_offset == "auto":
         from .placement import place
 
         zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length)
-        placement = place(machine, zero, options, progress=progress)
+        placement = place(machine, zero, options, progress=clock.progress)
         options = replace(options, work_offset=placement.offset)
-        lap("placement")
-    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options),
-                          tool_length=options.tool_length)
-    checked = check_poses(machine, poses, options, lap)
-    solved, blocks, rapid, violations = checked.path, checked.blocks, checked.rapid, list(checked.violations)
-    if placement is not None and not placement.feasible:
-        violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
-                                                                    f"{placement.reason}"))
-    lines = poses.line[blocks.pose]
-    source = poses.source
-    warnings = list(poses.warnings) + theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, lines, source)
-    if solved.in_cone.any() and machine.pole.cone > options.axis_tol:
-        warnings.append(f"{source}: the pole cone of the machine file ({machine.pole.cone:g} deg) is wider than the "
-                        f"axis tolerance ({options.axis_tol:g} deg): near the table normal the tool axis may be off "
-                        f"by up to {machine.pole.cone:g} deg")
-    lap("checks")
-    # Blocks that move no joint (repeated CL points) take no time and are left out.
-    moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
-    blocks, rapid = blocks.rows(moving), rapid[moving]
-    duration = block_durations(machine, poses, blocks, rapid)
-    schedule = None
-    if not violations and options.plan:
-        from .schedule import SequenceError, plan_program
-        from .timing import Limits
+        clock.lap("placement")
+    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options), tool_length=options.tool_length)
+    return poses, options, placement
 
-        try:
-            schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
-                                    poses.sequence[blocks.pose], Limits.from_machine(machine),
-                                    rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
-                                    corner=np.radians(machine.timing.corner_angle), workers=options.workers,
-                                    engine=options.planner)
-            duration = schedule.duration
-        except SequenceError as error:
-            violations.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
-                                        f"cannot plan the feed motion: {error}"))
-        lap("timing")
-    program = None if violations else _program(machine, poses, blocks, rapid, duration, options, placement)
-    return PostResult(poses, solved, blocks, rapid, duration, violations, warnings, program, schedule, seconds,
-                      placement)
+
+def postprocess(path: str | Path, machine: Machine, options: PostOptions,
+                progress: Callable[[str], None] = lambda stage: None) -> PostResult:
+    """Run every stage except writing, on the whole program at once (its arrays are kept: for a
+    long program, :func:`post`). Raises InputError for bad input; violations are returned."""
+    clock = _Clock(progress)
+    poses, options, placement = _machine_poses(path, machine, options, clock)
+    feasible = placement is None or placement.feasible
+    part = next(_parts(machine, poses, options, len(poses), clock.lap,
+                       plan=lambda found: options.plan and feasible and not found))
+    violations = _violations(part.checks, part.others, part.timing, placement)
+    warnings = list(poses.warnings) + part.warnings
+    if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
+        warnings.append(_cone_warning(machine, options, poses.source))
+    program = None
+    if not violations:
+        figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction < 1)),
+                          time=float(np.sum(part.duration)))
+        program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, part.duration,
+                         _at_blocks(_events(poses), part.blocks))
+    return PostResult(poses, part.path, part.blocks, part.rapid, part.duration, violations, warnings, program,
+                      part.schedule, clock.seconds, placement)
+
+
+@dataclass
+class Posted:
+    """What :func:`post` did: the violations (then nothing was written), the verification of the
+    program (None without), and the report's figures gathered over the parts."""
+
+    poses: MachinePoses
+    violations: list[Violation]
+    warnings: list[str]
+    figures: Figures
+    verification: Verification | None
+    parts: int
+    seconds: dict[str, float] = field(default_factory=dict)
+    placement: Placement | None = None
+
+    def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
+        """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
+        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures, self.placement,
+                       self.seconds)
+
+
+def post(path: str | Path, machine: Machine, options: PostOptions, output: str | os.PathLike[str] | None = None,
+         *, verify: bool = True, timing_figures: bool = False, part_poses: int = PART_POSES,
+         progress: Callable[[str], None] = lambda stage: None,
+         before_writing: Callable[[Posted], None] = lambda posted: None) -> Posted:
+    """Every stage, a part of the program at a time (see the module docstring), writing the
+    G-code to ``output`` (atomically; None: only check).
+
+    The blocks of each part are formatted, verified (with ``verify``: read back from their text
+    and checked against the part's CL poses, :class:`~verne_post.verify.Verifier`) and set
+    aside in a temporary file; the output is written only when no part has a violation and the
+    verification passes, with the header's figures (block count, cycle time, the certified
+    deviations) known from all the parts. ``timing_figures``: gather the planner's figures for
+    the report (time budget, ratios to the limits), which cost time. After a violation the
+    remaining parts are still checked (every violation is reported) but no longer planned.
+    ``before_writing`` gets the outcome before the output is written (and may stop it, raising).
+    """
+    clock = _Clock(progress)
+    poses, options, placement = _machine_poses(path, machine, options, clock)
+    fmt = gcode_format(machine)
+    writer = GcodeWriter(fmt)
+    verifier = Verifier(machine, source=str(output), tol=options.tol, axis_tol=options.axis_tol,
+                        work_offset=_offset(machine, options)) if verify and output is not None else None
+    # the header's figures are known at the end: the head is verified with those of an empty program
+    head = writer.head(_frame(machine, poses, options, placement, Figures()))
+    events, tools = _events(poses), {t.number: (t.length, t.delta) for t in poses.tools}
+    figures = Figures()
+    checks: list[Violation] = []
+    others: list[Violation] = []
+    timing: list[Violation] = []
+    warnings = list(poses.warnings)
+    in_cone = False
+    failed = placement is not None and not placement.feasible
+
+    def plan(found: list[Violation]) -> bool:
+        return options.plan and not failed and not found
+
+    with _spool(output) as spool:
+        for k, part in enumerate(_parts(machine, poses, options, part_poses, clock.lap, plan)):
+            failed = failed or bool(part.checks or part.others or part.timing)
+            if len(checks) + len(others) < MAX_VIOLATIONS:  # a program wrong everywhere: enough to say so
+                checks += part.checks
+                others += part.others
+            timing += part.timing
+            figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, part.duration,
+                        part.schedule, timing_figures, part.context)
+            warnings += part.warnings
+            in_cone = in_cone or bool(part.path.in_cone.any())
+            if output is not None and not failed:
+                own, last = part.own, part.end == len(poses)
+                blocks = part.blocks.rows(own)
+                mine = [e for e in events if part.first <= e.index < part.end or (last and e.index >= part.end)]
+                text = "".join(writer.body(Program(blocks.joints, part.rapid[own], part.duration[own],
+                                                   poses.line[blocks.pose], _at_blocks(mine, blocks),
+                                                   tool_lengths=tools)))
+                spool.write(text)
+                clock.lap("write")
+                if verifier is not None:
+                    verifier.read((head if k == 0 else "") + text + (writer.tail() if last else ""),
+                                  Reference.of(poses.part(part.first, part.end)), final=last)
+                    clock.lap("verify")
+            clock.progress(f"pose {part.end} of {len(poses)}")
+        if in_cone and machine.pole.cone > options.axis_tol:
+            warnings.append(_cone_warning(machine, options, poses.source))
+        violations = _violations(checks, others, timing, placement)
+        verification = verifier.result() if verifier is not None and not violations else None
+        posted = Posted(poses, violations, warnings, figures, verification, k + 1, clock.seconds, placement)
+        before_writing(posted)
+        if output is not None and not violations and (verification is None or verification.ok):
+            head = GcodeWriter(fmt).head(_frame(machine, poses, options, placement, figures))
+            if verification is not None:
+                head = with_header_line(head, verification.certificate())
+            spool.seek(0)
+            with atomic_write(output) as handle:
+                handle.write(head)
+                shutil.copyfileobj(spool, handle, 1 << 20)
+                handle.write(writer.tail())
+            clock.lap("write")
+    return posted
 
 
 def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
@@ -279,14 +632,26 @@ def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float
     return offset
 
 
-def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray, duration: np.ndarray,
-             options: PostOptions, placement: Placement | None) -> Program:
-    events = [replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in poses.events]
+def _events(poses: MachinePoses) -> list[Event]:
+    """The program's events, before the pose of their index."""
+    events = list(poses.events)
     if poses.tools and poses.tools[0].source == "--tool-length" and poses.tools[0].number == 0:
         # motion before any tool change: the program still says which tool length its joints are for
         events.insert(0, ToolChange(0, poses.tools[0].line, 0, poses.tools[0].length))
+    return events
+
+
+def _at_blocks(events: list[Event], blocks: Blocks) -> tuple[Event, ...]:
+    """The events with the index of the block they come before (len(blocks.pose): after the last)."""
+    return tuple(replace(e, index=int(np.searchsorted(blocks.pose, e.index, side="left"))) for e in events)
+
+
+def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placement: Placement | None,
+           figures: Figures, blocks: Blocks | None = None, rapid: np.ndarray | None = None,
+           duration: np.ndarray | None = None, events: tuple[Event, ...] = ()) -> Program:
+    """The program with its header (block counts and cycle time from ``figures``); its blocks
+    (mm, rad, s), if given, and their ``events``."""
     offset = _offset(machine, options)
-    tools = {t.number: (t.length, t.delta) for t in poses.tools}
     header = (
         f"POSTPROCESSOR VERNE-POST {__version__}",
         f"MACHINE {machine.source} ({machine.name})",
@@ -296,16 +661,18 @@ def _program(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.nd
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (
             "WORK OFFSET FROM " + ("THE MACHINE FILE" if options.work_offset is None else "THE USER"),)),
-        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {len(blocks.joints)} "
-        f"(CL POINTS {len(poses)}, INSERTED {int(np.sum(blocks.fraction < 1))})",
-        f"CYCLE TIME {np.sum(duration):.1f} S ({_TIME_BASIS[options.plan]})",
+        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {figures.blocks} "
+        f"(CL POINTS {len(poses)}, INSERTED {figures.inserted})",
+        f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]})",
     )
-    if any(isinstance(e, ToolChange) and e.tool == 0 for e in events):
+    if any(isinstance(e, ToolChange) and e.tool == 0 for e in _events(poses)):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
-    return Program(
-        joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=tuple(events),
-        part_name=poses.part_name, header=header, tool_lengths=tools,
-    )
+    tools = {t.number: (t.length, t.delta) for t in poses.tools}
+    if blocks is None:
+        return Program(np.zeros((0, 5)), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64),
+                       part_name=poses.part_name, header=header, tool_lengths=tools)
+    return Program(joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=events,
+                   part_name=poses.part_name, header=header, tool_lengths=tools)
 
 
 _TIME_BASIS = {True: "PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS",
@@ -354,5 +721,5 @@ def gcode_format(machine: Machine) -> GcodeFormat:
     return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
 
 
-__all__ = ["Checked", "PostOptions", "PostResult", "block_durations", "check_poses", "feed_speed", "gcode_format",
-           "postprocess", "write_gcode", "write_output"]
+__all__ = ["Checked", "Figures", "PostOptions", "PostResult", "Posted", "block_durations", "check_poses", "feed_speed",
+           "gcode_format", "post", "postprocess", "write_gcode", "write_output"]

@@ -9,7 +9,7 @@ a new one starts at every rapid, tool change and feed-mode change.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -51,6 +51,15 @@ class MachinePoses:
 
     def __len__(self) -> int:
         return len(self.tip)
+
+    def part(self, first: int, end: int) -> MachinePoses:
+        """Poses ``first`` to ``end - 1`` (views), with their events (index counted from ``first``)."""
+        rows = slice(first, end)
+        return replace(self, tip=self.tip[rows], axis=self.axis[rows], line=self.line[rows], rapid=self.rapid[rows],
+                       feed=self.feed[rows], inverse_time=self.inverse_time[rows], tool=self.tool[rows],
+                       tool_length=self.tool_length[rows], sequence=self.sequence[rows],
+                       events=tuple(replace(e, index=e.index - first) for e in self.events
+                                    if first <= e.index < end))
 
 
 def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, source: str) -> tuple[float, str]:

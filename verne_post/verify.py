@@ -37,21 +37,21 @@ import bisect
 import itertools
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass, fields, is_dataclass, replace
 from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .api import JOINT_NAMES, classify, forward_kinematics, joint_bounds, pose_margins
-from .gcode_reader import GcodeProgram, read_gcode
+from .gcode_reader import GcodeProgram, ReadState, read_gcode
 from .kinematics import Margins
 from .linearise import angle_to_arc, distance_to_segment
 from .machine import Machine
 from .poses import MachinePoses
 from .toolpath import Toolpath
 
-__all__ = ["Finding", "Reference", "Verification", "verify_blocks", "verify_program"]
+__all__ = ["Finding", "Reference", "Verification", "Verifier", "verify_blocks", "verify_program"]
 
 DEFAULT_TOL = 0.005  # mm, when neither the caller nor the program header gives one
 DEFAULT_AXIS_TOL = 0.05  # deg
@@ -102,6 +102,17 @@ class Reference:
         (already in the table frame: offset 0)."""
         return cls(path.source, np.asarray(path.tip, float) + np.asarray(tuple(work_offset), float), path.axis,
                    path.line, path.rapid, path.feed, path.inverse_time)
+
+    def rows(self, index: slice | np.ndarray) -> Reference:
+        return replace(self, **{name: getattr(self, name)[index] for name in _POSE_FIELDS})
+
+    def then(self, other: Reference) -> Reference:
+        """These poses, then those of ``other``."""
+        return replace(self, **{name: np.concatenate([getattr(self, name), getattr(other, name)])
+                                for name in _POSE_FIELDS})
+
+
+_POSE_FIELDS = ("tip", "axis", "line", "rapid", "feed", "inverse_time")
 
 
 @dataclass(frozen=True)
@@ -200,9 +211,15 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
 
 
 def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
-                  axis_tol: float, work_offset: Iterable[float] = (0.0, 0.0, 0.0)) -> Verification:
-    """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg)."""
-    findings = [] if program.end_line is not None else [
+                  axis_tol: float, work_offset: Iterable[float] = (0.0, 0.0, 0.0), *, overlap: bool = False,
+                  final: bool = True) -> Verification:
+    """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg).
+
+    A part of a program (:class:`Verifier`): with ``overlap`` the first block and the first CL
+    pose are the last ones of the part before, already verified: only the motion from there
+    counts; the end of the program is looked for only when ``final``.
+    """
+    findings = [] if program.end_line is not None or not final else [
         Finding(program.last_line, "program", "the program ends without M2/M30 (cut off?)")]
     findings += [Finding(line, "program", reason) for line, reason in program.problems]
     unknown = ~np.all(np.isfinite(program.joints), axis=1)
@@ -218,9 +235,12 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     speed_ratio = _joint_speed(program, machine, findings)
     tip_dev = axis_dev = feed_ratio = peak_ratio = None
     reached = None
+    skip = int(overlap)
     if reference is not None:
         tip_dev, axis_dev, feed_ratio, peak_ratio, reached = _against(program, machine, reference, motion,
-                                                                      tol, np.radians(axis_tol), findings)
+                                                                      tol, np.radians(axis_tol), findings, skip)
+    if overlap:  # what the part before found at its last block
+        findings = [f for f in findings if f.line != program.line[0]]
     x, y, z = work_offset
     unique: dict[tuple[int, str], Finding] = {}
     for finding in findings:  # one per line and kind: the first (worst or earliest) stays
@@ -228,15 +248,106 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     margins = samples.margins
     return Verification(
         source=program.source, against=None if reference is None else reference.source,
-        findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))), blocks=len(program),
-        samples=len(block), tol=tol, axis_tol=axis_tol,
+        findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))), blocks=len(program) - skip,
+        samples=len(block) - skip, tol=tol, axis_tol=axis_tol,
         work_offset=(float(x), float(y), float(z)),
         tip_deviation=tip_dev, axis_deviation=axis_dev,
-        cl_points=None if reference is None else len(reference.tip), cl_points_reached=reached,
+        cl_points=None if reference is None else len(reference.tip) - skip, cl_points_reached=reached,
         feed_ratio=feed_ratio, peak_feed_ratio=peak_ratio, joint_speed_ratio=speed_ratio,
         smallest_margins={name: _nanmin(getattr(margins, name)) for name in
                           ("serial", "parallel", "machine", "rod_clearance")},
     )
+
+
+class Verifier:
+    """Verification of a long program a part at a time, each part with the CL poses it must
+    reach (table frame, :class:`Reference`): memory bounded by the largest part.
+
+    Each part is read on from where the part before left the reading (modal state, position,
+    tool) and verified from the last block end of the part before, against its CL poses after
+    the last pose of the part before; findings and figures are gathered into one
+    :class:`Verification`. A part whose blocks reach no pose of its own (a move back to where
+    the program stands) hands its poses on to the next. Tolerances: mm and degrees.
+    """
+
+    def __init__(self, machine: Machine, *, source: str, tol: float, axis_tol: float,
+                 work_offset: tuple[float, float, float]) -> None:
+        self.machine, self.source, self.tol, self.axis_tol, self.work_offset = (machine, source, tol, axis_tol,
+                                                                                 work_offset)
+        self.state: ReadState | None = None
+        self.last: GcodeProgram | None = None  # the last block so far (one row)
+        self.pending: Reference | None = None  # poses not yet verified: the last one reached, and any after
+        self.parts: list[Verification] = []
+
+    def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
+        """Verify the next part of the program (whole lines) against ``reference``, the next CL
+        poses; ``final`` for the last part."""
+        program = read_gcode(text, self.source, self.state, final)
+        self.state = program.state
+        if reference is not None and self.pending is not None:
+            reference = self.pending.then(reference)
+        if len(program) == 0 and not final:
+            self.parts.append(verify_blocks(program, self.machine, None, self.tol, self.axis_tol, self.work_offset,
+                                            final=False))
+            self.pending = reference
+            return
+        overlap = self.last is not None
+        if overlap:
+            program = _joined_program(self.last, program)
+        self.parts.append(verify_blocks(program, self.machine, reference, self.tol, self.axis_tol, self.work_offset,
+                                        overlap=overlap, final=final))
+        if len(program):
+            self.last = _last_block(program)
+        if reference is not None and len(reference.tip):
+            self.pending = reference.rows(slice(-1, None))
+
+    def result(self) -> Verification:
+        """The verification of every part read."""
+        parts = self.parts
+        unique: dict[tuple[int, str], Finding] = {}
+        for finding in (f for part in parts for f in part.findings):
+            unique.setdefault((finding.line, finding.kind), finding)
+        against = next((part.against for part in parts if part.against is not None), None)
+
+        def most(name: str, pick: Any = max) -> float | None:
+            values = [getattr(part, name) for part in parts if getattr(part, name) is not None]
+            return pick(values) if values else None
+
+        def total(name: str) -> int | None:
+            values = [getattr(part, name) for part in parts if getattr(part, name) is not None]
+            return sum(values) if values else None
+
+        def per_name(name: str, pick: Any) -> dict[str, float | None]:
+            names = getattr(parts[0], name) if parts else {}
+            out = {}
+            for key in names:
+                values = [getattr(part, name)[key] for part in parts if getattr(part, name)[key] is not None]
+                out[key] = pick(values) if values else None
+            return out
+
+        return Verification(
+            source=self.source, against=against,
+            findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))),
+            blocks=sum(part.blocks for part in parts), samples=sum(part.samples for part in parts), tol=self.tol,
+            axis_tol=self.axis_tol, work_offset=self.work_offset,
+            tip_deviation=most("tip_deviation"), axis_deviation=most("axis_deviation"),
+            cl_points=total("cl_points"), cl_points_reached=total("cl_points_reached"),
+            feed_ratio=most("feed_ratio"), peak_feed_ratio=most("peak_feed_ratio"),
+            joint_speed_ratio=per_name("joint_speed_ratio", max), smallest_margins=per_name("smallest_margins", min),
+        )
+
+
+_BLOCK_FIELDS = ("joints", "rapid", "inverse_time", "feed", "duration", "line", "tool", "tool_length")
+
+
+def _last_block(program: GcodeProgram) -> GcodeProgram:
+    return replace(program, **{name: getattr(program, name)[-1:] for name in _BLOCK_FIELDS})
+
+
+def _joined_program(first: GcodeProgram, then: GcodeProgram) -> GcodeProgram:
+    """``then`` with the blocks of ``first`` before its own."""
+    return replace(then, **{name: np.concatenate([getattr(first, name), getattr(then, name)])
+                            for name in _BLOCK_FIELDS})
 
 
 def _nanmin(values: np.ndarray) -> float | None:
@@ -648,10 +759,12 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
 
 
 def _against(program: GcodeProgram, machine: Machine, reference: Reference, motion: _Motion, tol: float,
-             axis_tol: float, findings: list[Finding]) -> tuple[float, float, float | None, float | None, int]:
+             axis_tol: float, findings: list[Finding], skip: int = 0
+             ) -> tuple[float, float, float | None, float | None, int]:
     """Reach, order, deviation and feed findings; returns the largest tip deviation (mm), axis
     deviation (deg), feed ratio, peak feed ratio within a block and the number of CL points
-    reached."""
+    reached (of those after the first ``skip``: the first ``skip`` blocks and poses were
+    verified with the part before)."""
     m_blocks = len(program)
     lines, cl_lines = program.line, reference.line
     ends = motion.ends
@@ -677,6 +790,7 @@ def _against(program: GcodeProgram, machine: Machine, reference: Reference, moti
     follows = ~program.rapid[curves.moves] & ~cl_rapid[curves.moves]
     inner_follows = np.repeat(follows, curves.n - 1)
     end_blocks = np.flatnonzero(motion.known & ends.reachable)
+    end_blocks = end_blocks[end_blocks >= skip]
     point_block = np.r_[end_blocks, curves.block[inner_follows]]
     point_tip = np.concatenate([ends.tip[end_blocks], curves.samples.tip[inner_follows]])
     point_axis = np.concatenate([ends.axis[end_blocks], curves.samples.axis[inner_follows]])
@@ -700,7 +814,7 @@ def _against(program: GcodeProgram, machine: Machine, reference: Reference, moti
                                 limit=float(np.degrees(axis_tol))))
     feed_ratio, peak_ratio = _feed(program, reference, machine, matched, pieces, curves, follows, findings)
     return (float(tip_total.max(initial=0.0)), float(np.degrees(axis_total.max(initial=0.0))), feed_ratio,
-            peak_ratio, int(np.count_nonzero(matched >= 0)))
+            peak_ratio, int(np.count_nonzero(matched[skip:] >= 0)))
 
 
 def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: np.ndarray, tol: float,

@@ -23,7 +23,7 @@ import re
 from collections.abc import Iterable, Iterator
 from typing import NamedTuple
 
-__all__ = ["TEXT_RECORDS", "Record", "records", "split_lines"]
+__all__ = ["TEXT_RECORDS", "Record", "iter_lines", "records", "split_lines"]
 
 TEXT_RECORDS = frozenset({"PPRINT", "PARTNO", "INSERT"})
 
@@ -44,14 +44,30 @@ class Record(NamedTuple):
     line: int
 
 
+#: Characters of text split into lines at once (:func:`iter_lines`).
+_BLOCK = 1 << 20
+
+
+def iter_lines(text: str) -> Iterator[str]:
+    """Lines of ``text`` with LF, CRLF or CR line ends, without a trailing empty line, a block of
+    text at a time (the lines of a large file are never all in memory at once)."""
+    start = 0
+    while start < len(text):
+        cut = text.find("\n", start + _BLOCK)
+        end = len(text) if cut < 0 else cut + 1
+        block = text[start:end]
+        if "\r" in block:
+            block = block.replace("\r\n", "\n").replace("\r", "\n")
+        lines = block.split("\n")
+        if lines[-1] == "":  # the block ends with its last line's newline
+            lines.pop()
+        yield from lines
+        start = end
+
+
 def split_lines(text: str) -> list[str]:
     """Lines of ``text`` with CRLF or CR line ends, without a trailing empty line."""
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
-    lines = text.split("\n")
-    if lines and lines[-1] == "":
-        lines.pop()
-    return lines
+    return list(iter_lines(text))
 
 
 def _make(body: str, line: int) -> Record | None:

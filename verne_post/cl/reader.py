@@ -49,7 +49,7 @@ from verne_post.toolpath import Toolpath
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes
 from .dialects import ArcDirection, FrameMode, detect_dialect
-from .lexer import Record, records, split_lines
+from .lexer import Record, iter_lines, records
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -187,7 +187,7 @@ class _Subroutines:
 
 
 def _run(st: ReaderState, recs: Iterable[Record], subs: _Subroutines, depth: int) -> None:
-    rows, out_lines = st.rows, st.lines
+    add_row, add_line = st.rows.data.extend, st.lines.append  # the fast route's appends, bound once
     fast = st.fast_goto_ok()
     for rec in recs:
         if subs.capturing is not None:
@@ -208,15 +208,15 @@ def _run(st: ReaderState, recs: Iterable[Record], subs: _Subroutines, depth: int
                 vals = []
             if len(vals) == 3 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:  # also false for NaN
                 vals += st.axis
-                rows.append(vals)
-                out_lines.append(rec.line)
+                add_row(vals)
+                add_line(rec.line)
                 continue
             if len(vals) == 6 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:
                 i, j, k = vals[3], vals[4], vals[5]
                 if 0.98 < i * i + j * j + k * k < 1.02:
                     st.axis = (i, j, k)
-                    rows.append(vals)
-                    out_lines.append(rec.line)
+                    add_row(vals)
+                    add_line(rec.line)
                     continue
         if rec.word == "DEFSUB":
             subs.capturing = (subs.name(st, rec), rec.line, [])
@@ -236,7 +236,7 @@ def _run(st: ReaderState, recs: Iterable[Record], subs: _Subroutines, depth: int
         fast = st.fast_goto_ok()
 
 
-def _parse(lines: list[str], st: ReaderState) -> None:
+def _parse(lines: Iterable[str], st: ReaderState) -> None:
     subs = _Subroutines()
     _run(st, records(lines), subs, 0)
     if subs.capturing is not None:
@@ -253,7 +253,7 @@ def _arc_evidence(st: ReaderState) -> tuple[int, int, int | None, int | None]:
     """Tangent-move votes of every arc: (ccw votes, cw votes, first ccw-voting arc line, first cw one)."""
     if not st.arcs:
         return 0, 0, None, None
-    rows = np.array(st.rows, dtype=float)[:, :3]
+    rows = st.rows.array()[:, :3]
     nan = np.full(3, np.nan)
     before = np.array([rows[a.start - 1] if a.start > 0 else nan for a in st.arcs])
     after = np.array([rows[a.end + 1] if a.end + 1 < len(rows) else nan for a in st.arcs])
@@ -291,18 +291,17 @@ def read_cl(
     if not (isinstance(chordal_tolerance, (int, float)) and 1e-6 <= chordal_tolerance <= 10.0):
         raise InputError(f"chordal tolerance must be from 1e-6 to 10 mm, got {chordal_tolerance!r}")
     text = _read_text(path, src)
-    lines = split_lines(text)
     dialect = detect_dialect(text).with_overrides(arc_direction, frame)
 
-    def attempt(direction: ArcDirection) -> ReaderState:
+    def attempt(text: str, direction: ArcDirection) -> ReaderState:
         warnings = Warnings(src)
         file_units = _decide_units(text, override, src, warnings)
         st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings)
         st.arc_direction = direction
-        _parse(lines, st)
+        _parse(iter_lines(text), st)
         return st
 
-    st = attempt(dialect.arc_direction or "ccw")
+    st = attempt(text, dialect.arc_direction or "ccw")
     ccw, cw, first_ccw, first_cw = _arc_evidence(st)
     if dialect.arc_direction is not None:
         against, first = (cw, first_cw) if dialect.arc_direction == "ccw" else (ccw, first_ccw)
@@ -315,10 +314,11 @@ def read_cl(
                 f"arcs say the other way (this arc among them): check the CAM system, or give --arc-direction",
                 source=src, line=first)
     elif cw > ccw:
-        st = attempt("cw")
+        st = attempt(text, "cw")
     elif ccw == cw and st.arcs:
         st.warn(st.arcs[0].line, "no tangent move tells the arc direction: counter-clockwise about the CIRCLE "
                 "axis assumed (give --arc-direction to choose)")
+    del text  # the toolpath's arrays need the room
     return st.result()
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import re
+from array import array
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -73,6 +74,31 @@ class Warnings:
         return tuple(out)
 
 
+class PoseRows:
+    """Rows of six floats (x, y, z, i, j, k) appended one by one, held as one packed buffer (8
+    bytes a number, not a Python list of float objects)."""
+
+    def __init__(self) -> None:
+        self.data = array("d")
+
+    def __len__(self) -> int:
+        return len(self.data) // 6
+
+    def append(self, row: list[float]) -> None:
+        self.data.extend(row)
+
+    def extend(self, rows: np.ndarray) -> None:
+        self.data.frombytes(np.ascontiguousarray(rows, dtype=float).tobytes())
+
+    def __getitem__(self, k: int) -> list[float]:
+        k = k % len(self)
+        return self.data[6 * k:6 * k + 6].tolist()
+
+    def array(self) -> np.ndarray:
+        """(N, 6), a view of the buffer (valid until the next append)."""
+        return np.frombuffer(self.data, dtype=float).reshape(-1, 6)
+
+
 @dataclass
 class Arc:
     """An arc's record for the direction check: pose indices and its centre and unit axis (file units)."""
@@ -98,8 +124,8 @@ class ReaderState:
         self.arc_direction = dialect.arc_direction or "ccw"  # a provisional reading where undocumented
         self.warnings = warnings
         # poses: rows of [x, y, z, i, j, k] in the CL frame of their run, file units
-        self.rows: list[list[float]] = []
-        self.lines: list[int] = []
+        self.rows = PoseRows()
+        self.lines = array("q")
         self.motion: dict[int, int] = {}  # pose index -> MOTION code where not a plain feed move
         self.feed_override: dict[int, float] = {}
         # modal runs: (first pose index, feed mm/min or 1/min, inverse time, tool, frame id)
@@ -226,7 +252,7 @@ class ReaderState:
                             "split the program", line)
         self.add_pose(points[0], axes[0], line, rapid, motion=motion)
         start = len(self.lines)
-        self.rows.extend(np.hstack([points[1:], axes[1:]]).tolist())
+        self.rows.extend(np.hstack([points[1:], axes[1:]]))
         self.lines.extend([line] * (len(points) - 1))
         code = MOTION["rapid"] if rapid else MOTION[motion]
         if code:
@@ -268,9 +294,11 @@ class ReaderState:
         n = len(self.rows)
         if n == 0:
             raise InputError("no motion records in file", source=self.src)
-        arr = np.array(self.rows, dtype=float)
+        arr = self.rows.array()
         tip, axis = arr[:, :3].copy(), arr[:, 3:].copy()
-        line = np.array(self.lines, dtype=np.int64)
+        line = np.frombuffer(self.lines, dtype=np.int64).copy()
+        del arr
+        self.rows, self.lines = PoseRows(), array("q")  # read: the room goes to the arrays
         validate_poses(tip, axis, line, self.src, "GOTO")
         axis /= np.sqrt(np.einsum("ij,ij->i", axis, axis))[:, None]
         starts = np.array([r[0] for r in self.runs], dtype=np.int64)
@@ -324,25 +352,36 @@ def _same_frame(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarra
     return bool(np.allclose(a[0], b[0], atol=1e-9) and np.allclose(a[1], b[1], atol=1e-9))
 
 
+#: Poses validated at once (bounds the temporary arrays of a long toolpath).
+_VALIDATE_CHUNK = 1 << 16
+
+
 def validate_poses(tip: np.ndarray, axis: np.ndarray, line: np.ndarray, src: str, what: str) -> None:
     """Raise for the first (by line) pose with a non-finite value or a non-unit / zero tool axis."""
-    finite = np.isfinite(tip).all(axis=1) & np.isfinite(axis).all(axis=1)
-    safe = np.where(np.isfinite(axis), axis, 0.0)
-    norms = np.sqrt(np.einsum("ij,ij->i", safe, safe))
-    huge = (np.abs(np.where(np.isfinite(tip), tip, 0.0)) > MAX_COORD).any(axis=1)
-    bad = ~finite | huge | (norms < 1e-6) | (np.abs(norms - 1.0) > AXIS_LEN_TOL)
-    if not bad.any():
+    bad = np.concatenate([_bad_poses(tip[k:k + _VALIDATE_CHUNK], axis[k:k + _VALIDATE_CHUNK]) + k
+                          for k in range(0, len(tip), _VALIDATE_CHUNK)] or [np.zeros(0, np.int64)])
+    if not bad.size:
         return
-    k = int(np.flatnonzero(bad)[np.argmin(line[bad])])
+    k = int(bad[np.argmin(line[bad])])
     row = np.concatenate([tip[k], axis[k]])
+    norm = float(np.sqrt(np.sum(np.where(np.isfinite(axis[k]), axis[k], 0.0) ** 2)))
     if np.isnan(row).any():
         reason = f"NaN in {what}"
     elif not np.isfinite(row).all():
         reason = f"infinite value in {what}"
-    elif huge[k]:
+    elif (np.abs(tip[k]) > MAX_COORD).any():
         reason = f"coordinate out of range in {what} (|value| > {MAX_COORD:g})"
-    elif norms[k] < 1e-6:
+    elif norm < 1e-6:
         reason = "tool axis has zero length"
     else:
-        reason = f"tool axis has length {norms[k]:.6g}, expected a unit vector"
+        reason = f"tool axis has length {norm:.6g}, expected a unit vector"
     raise InputError(reason, source=src, line=int(line[k]))
+
+
+def _bad_poses(tip: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Indices of the poses with a non-finite value, a coordinate out of range, or an axis not of unit length."""
+    finite = np.isfinite(tip).all(axis=1) & np.isfinite(axis).all(axis=1)
+    safe = np.where(np.isfinite(axis), axis, 0.0)
+    norms = np.sqrt(np.einsum("ij,ij->i", safe, safe))
+    huge = (np.abs(np.where(np.isfinite(tip), tip, 0.0)) > MAX_COORD).any(axis=1)
+    return np.flatnonzero(~finite | huge | (norms < 1e-6) | (np.abs(norms - 1.0) > AXIS_LEN_TOL))
