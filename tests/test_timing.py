@@ -295,7 +295,7 @@ def test_both_engines_plan_the_zigzag_alike(machine: vp.Machine, limits: Limits,
 def test_sequences_planned_together_are_planned_as_alone(machine: vp.Machine, limits: Limits,
                                                          helix_path: tuple[np.ndarray, np.ndarray],
                                                          zigzag_path: tuple[np.ndarray, np.ndarray]) -> None:
-    """One batch of different sequences (one refused) gives each the plan it gets on its own."""
+    """One batch of different sequences (one refused) gives each exactly the plan it gets on its own."""
     (hj, ht), (zj, zt) = helix_path, zigzag_path
     repeated = np.insert(hj[:10], 4, hj[4], axis=0), np.insert(ht[:10], 4, ht[4], axis=0)
     sequences = [(hj[:300], ht[:300], np.full(299, 40.0)), (zj, zt, np.full(len(zj) - 1, 100.0)),
@@ -307,8 +307,9 @@ def test_sequences_planned_together_are_planned_as_alone(machine: vp.Machine, li
         if isinstance(plan, PlanningError):
             continue
         alone = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
-        assert plan.total == pytest.approx(alone.total, rel=1e-9)
-        np.testing.assert_allclose(plan.durations, alone.durations, rtol=1e-9)
+        # to the last bit: a program posted whole or in parts, on any number of processes, gets
+        # the same G-code
+        np.testing.assert_array_equal(plan.durations, alone.durations)
         check_feed_plan(machine, plan, joints, tip, feed, limits)
 
 

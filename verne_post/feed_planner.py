@@ -86,7 +86,6 @@ _MAX_PIECE_SAMPLES = 64  # verification samples per piece of the time law (see _
 _VERIFY_CHUNK = 1 << 16  # samples evaluated together (bounded memory)
 _VERIFY_TOL = 1e-6  # relative excess tolerated by the verification (rounding)
 _SHRINK = 0.97  # extra factor applied when lowering caps after a violation
-_SPAN = 1.0 + 1e-9  # local coordinates are divided by their range times this to make search keys
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,13 +220,15 @@ def _ranges(start: np.ndarray, stop: np.ndarray) -> np.ndarray:
     return np.arange(int(count.sum())) + offset
 
 
-def _segment_cumsum(values: np.ndarray, start: np.ndarray) -> np.ndarray:
+def _segment_cumsum(values: np.ndarray, start: np.ndarray, dtype: type = float) -> np.ndarray:
     """Per segment, the running sum of ``values`` from 0 (segments begin at ``start``, with a
-    last entry = len(values)); the sums restart at each segment, so they are as exact as a
-    running sum of each segment alone (long double)."""
-    total = np.concatenate([[0.0], np.cumsum(values.astype(np.longdouble))])
-    owner = np.repeat(np.arange(len(start) - 1), np.diff(start))
-    return (total[1:] - total[start[:-1]][owner]).astype(float)
+    last entry = len(values)), each summed on its own: a sequence's plan does not depend, even
+    in its last bit, on what it is planned with (the same G-code whether a program is planned
+    whole or in parts)."""
+    out = np.empty(len(values), dtype=dtype)
+    for a, b in zip(start[:-1].tolist(), start[1:].tolist(), strict=True):
+        np.cumsum(values[a:b], dtype=dtype, out=out[a:b])
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,14 +236,13 @@ class _Pieces:
     """Piecewise cubics of many sequences: pieces grouped by sequence, in local coordinates.
 
     ``start`` (P,) local start of each piece; ``first`` (R + 1,) offsets of each sequence's
-    pieces; ``span`` (R,) a bound on each sequence's local coordinate; ``coef`` (4, P) or
-    (4, D, P) cubic coefficients (highest first) in (x - start), or None for a plain sorted
-    grid. Vector values come out dimension-major, (D, n): each joint's row is contiguous.
+    pieces; ``coef`` (4, P) or (4, D, P) cubic coefficients (highest first) in (x - start), or
+    None for a plain sorted grid. Vector values come out dimension-major, (D, n): each joint's
+    row is contiguous.
     """
 
     start: np.ndarray
     first: np.ndarray
-    span: np.ndarray
     coef: np.ndarray | None = None
 
     @cached_property
@@ -251,12 +251,13 @@ class _Pieces:
 
     @cached_property
     def _keys(self) -> np.ndarray:
-        # Sequence number plus the position scaled into [0, 1): one sorted array for every search.
-        return self.owner + self.start / (self.span[self.owner] * _SPAN)
+        # (sequence, position) as complex numbers, which numpy orders lexicographically: one
+        # exact sorted array for every search.
+        return self.owner + 1j * self.start
 
     def search(self, seq: np.ndarray, x: np.ndarray, side: Literal["left", "right"] = "right") -> np.ndarray:
         """np.searchsorted of local positions x among the starts of sequence seq (global index)."""
-        return np.searchsorted(self._keys, seq + x / (self.span[seq] * _SPAN), side=side)
+        return np.searchsorted(self._keys, seq + 1j * x, side=side)
 
     def clip(self, seq: np.ndarray, index: np.ndarray) -> np.ndarray:
         """Indices clipped into the pieces of their sequences."""
@@ -486,7 +487,6 @@ class _Batch:
         s[first[1:] - 1] = 1.0
         ds = s[left + 1] - s[left]
         coef = np.ascontiguousarray(_not_a_knot(s, np.hstack([joints, tip]), first).transpose(0, 2, 1))
-        ones = np.ones(count)
         length = np.linalg.norm(tip[left + 1] - tip[left], axis=1)
         rotary_only = length < TIP_EPS
         rotary = np.linalg.norm(dq[:, 3:], axis=1)
@@ -494,8 +494,8 @@ class _Batch:
             tip_cap = np.where(rotary_only, np.inf, feed * ds / np.maximum(length, 1e-300))
             rot_cap = np.where(rotary_only & (rotary > 0), angular_feed * ds / np.maximum(rotary, 1e-300), np.inf)
             dur_cap = ds / min_duration if min_duration > 0 else np.full(len(ds), np.inf)
-        return cls(limits, jerk, first, bfirst, s, _Pieces(s[left], bfirst, ones, coef[:, :DOF]),
-                   _Pieces(s[left], bfirst, ones, coef[:, DOF:]), np.where(rotary_only, np.inf, feed),
+        return cls(limits, jerk, first, bfirst, s, _Pieces(s[left], bfirst, coef[:, :DOF]),
+                   _Pieces(s[left], bfirst, coef[:, DOF:]), np.where(rotary_only, np.inf, feed),
                    np.minimum(np.minimum(tip_cap, rot_cap), dur_cap))
 
     def point_cap(self, seq: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -548,7 +548,7 @@ class _Profiles:
         pfirst = self.bfirst - np.arange(len(self.bfirst))
         ends = self.bfirst[1:] - 1
         starts = np.delete(self.breaks, ends)
-        return _Pieces(starts, pfirst, np.maximum(self.breaks[ends], 1e-300), self.coef)
+        return _Pieces(starts, pfirst, self.coef)
 
     @property
     def total(self) -> np.ndarray:
@@ -608,14 +608,14 @@ class _Planner:
         end_seq = np.repeat(np.arange(count), 4)
         gseq, grid, gfirst = _sorted_points(np.concatenate([wseq[kept], bseq[long][owner], end_seq, end_seq]),
                                             np.concatenate([s[kept], interior, ends, 1.0 - ends]), count)
-        self.grid = _Pieces(grid, gfirst, np.ones(count))
+        self.grid = _Pieces(grid, gfirst)
         n = len(grid)
         # Check points: the gridpoints, the middles of their intervals, the waypoints, the block middles.
         inner_grid = np.flatnonzero(np.diff(gseq) == 0)
         cseq, check, cfirst = _sorted_points(
             np.concatenate([gseq, gseq[inner_grid], wseq, bseq]),
             np.concatenate([grid, 0.5 * (grid[inner_grid] + grid[inner_grid + 1]), s, mids]), count)
-        checks = _Pieces(check, cfirst, np.ones(count))
+        checks = _Pieces(check, cfirst)
         raw = batch.point_cap(cseq, check)
         # With the filter, the speed at a point mixes the speeds within half a filter width of
         # travel around it: each check point imposes its cap over erode * w * (its own capped
@@ -660,10 +660,6 @@ class _Planner:
         for attempt in range(self.max_refinements + 1):
             solved = []
             xmax = np.minimum(base, cap)
-            together = self._topp_together(active, xmax, acc_scale)
-            if together is not None:
-                x[_ranges(self.grid.first[active], self.grid.first[active + 1])] = together
-                solved, active = list(active), active[:0]
             for r in active:
                 outcome = self._topp(int(r), xmax, acc_scale)
                 if isinstance(outcome, PlanningError):
@@ -725,32 +721,6 @@ class _Planner:
         umax = acc_scale[rows] * self.umax[rows] * t0 ** 2 if self.batch.jerk else None
         return np.maximum(xmax[rows], 0.0) * t0 ** 2, umax, self.q1[rows] * inverse, self.q2[rows] * inverse
 
-    def _topp_together(self, seqs: np.ndarray, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | None:
-        """The squared path speeds of all the sequences ``seqs`` from one copp-py call, or None.
-
-        The sequences are laid end to end along one parameter (sequence k on [2k, 2k + 1]), each
-        in its own time scale, held at rest at both of its ends: the problems stay independent
-        and one call saves the per-call cost of many small ones. None (engine other than copp,
-        or any failure): plan them one by one.
-        """
-        if self.engine != "copp" or len(seqs) < 2:
-            return None
-        grid = self.grid
-        rows = _ranges(grid.first[seqs], grid.first[seqs + 1])
-        counts = grid.first[seqs + 1] - grid.first[seqs]
-        k = np.repeat(np.arange(len(seqs)), counts)
-        t0 = self.t_scale[seqs][k]
-        cap, umax, q1, q2 = self._scaled(rows, t0, xmax, acc_scale)
-        ends = np.r_[0, np.cumsum(counts)]
-        cap[ends[:-1]] = cap[ends[1:] - 1] = 0.0
-        try:
-            x = self.solve(2.0 * k + grid.start[rows], cap, umax, q1, q2) / t0 ** 2
-        except ToppError as error:
-            logger.debug("copp-py on %d sequences at once failed (%s): one by one", len(seqs), error)
-            return None
-        x[ends[:-1]] = x[ends[1:] - 1] = 0.0
-        return x
-
     def _topp(self, r: int, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | PlanningError:
         """Squared path speeds (1/s^2) at the gridpoints of sequence r, time-optimal under xmax
         and the accelerations.
@@ -809,12 +779,14 @@ class _Planner:
             return _Profiles(seqs, t_nodes, nfirst, coef), stuck
         total = t_nodes[nfirst[1:] - 1]
         w = self.w[seqs]
-        sigma = _Pieces(t_nodes[inner], ifirst, np.maximum(total, 1e-300))
+        sigma = _Pieces(t_nodes[inner], ifirst)
         s0, v0 = s_nodes[inner], v[inner]
         area = s0 * dt + v0 * dt ** 2 / 2.0 + u * dt ** 3 / 6.0
         # Integrals of sigma in long double, restarting at each sequence: ~1e-16 precision in s.
-        prefix = np.concatenate([[0.0], np.cumsum(area.astype(np.longdouble))])
-        base = prefix[ifirst]
+        running = _segment_cumsum(area, ifirst, np.longdouble)  # through each piece
+        total_area = running[ifirst[1:] - 1]
+        prefix = np.concatenate([[np.longdouble(0.0)], running[:-1]])  # before each piece
+        prefix[ifirst[:-1]] = 0.0
 
         def derivatives(k: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             i = sigma.locate(k, t)
@@ -828,8 +800,8 @@ class _Planner:
             i = sigma.locate(k, t)
             tau = t - sigma.start[i]
             local = (s0[i] * tau + v0[i] * tau ** 2 / 2.0 + u[i] * tau ** 3 / 6.0).astype(np.longdouble)
-            out = np.where(t <= 0.0, np.longdouble(0.0), prefix[i] - base[k] + local)
-            return np.where(t >= total[k], prefix[ifirst[k + 1]] - base[k] + (t - total[k]).astype(np.longdouble),
+            out = np.where(t <= 0.0, np.longdouble(0.0), prefix[i] + local)
+            return np.where(t >= total[k], total_area[k] + (t - total[k]).astype(np.longdouble),
                             out)
 
         bseq, breaks, bfirst = _sorted_points(np.concatenate([owner, owner]),
@@ -867,8 +839,8 @@ class _Planner:
         last_piece = pieces.first[1:] - 1
         at[ends] = pieces(last_piece, profiles.breaks[ends])
         owner = np.repeat(np.arange(count), np.diff(profiles.bfirst))
-        at = np.maximum.accumulate(at + 2.0 * owner) - 2.0 * owner
-        levels = _Pieces(at, profiles.bfirst, np.ones(count))
+        at = np.maximum.accumulate(owner + 1j * at).imag  # per sequence (complex order: lexicographic)
+        levels = _Pieces(at, profiles.bfirst)
         seqs = profiles.seqs
         wcount = batch.wfirst[seqs + 1] - batch.wfirst[seqs]
         tfirst = np.r_[0, np.cumsum(wcount)]
