@@ -5,8 +5,11 @@
 For each size the 5-axis example is generated with about that many GOTO points
 (examples/generate_job.py; arcs add a few more CL points) and posted by the command in a process
 of its own; its peak resident set size is the kernel's (``os.wait4`` of that process: the largest
-of it and the planner's worker processes). Beside it, in the same run: the footprint of starting
-Python and importing verne-post (the floor), and the whole program posted at once
+of it and the planner's worker processes). This process imports nothing of verne-post and the
+jobs are generated in processes of their own: the kernel's figure keeps the size of a process
+before it starts the command (fork, then exec), which must not be this one's. Beside it, in the
+same run: the footprint of starting Python and importing verne-post (the floor), and the whole
+program posted at once
 (``pipeline.postprocess`` and ``write_output``: the arrays of every stage for the whole program,
 as before the posting in parts) up to ``--baseline-max`` points. The G-code of both is compared.
 Target: 300k points within 25 % of 30k, 3M under 1 GiB (the 3M case takes minutes: give
@@ -28,7 +31,7 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from .pipeline import _generator  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 #: The whole program at once, as ``verne-post`` posted it before the parts (postprocess + write_output).
 _WHOLE = """
@@ -69,7 +72,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         for size in sizes:
             source, output, whole = (Path(folder) / name for name in ("job.cls", "job.nc", "whole.nc"))
-            source.write_text(_generator().generate(size))
+            subprocess.run([sys.executable, str(ROOT / "examples" / "generate_job.py"), "--points", str(size), "-o",
+                            str(source)], check=True, capture_output=True)
             parts, seconds = _peak([sys.executable, "-m", "verne_post", str(source), "-o", str(output), "-q"])
             points = int(re.search(r"CL POINTS (\d+)", output.read_text()[:4000]).group(1))
             line = f"{size:>10,}{points:>11,}{parts:>12.0f}{seconds:>7.1f}"
