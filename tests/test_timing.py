@@ -17,6 +17,7 @@ from scipy.interpolate import CubicSpline
 
 import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
+from verne_post import feed_planner
 from verne_post.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
 from verne_post.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
 
@@ -414,3 +415,23 @@ def test_rapid_beyond_ruckigs_duration_limit_is_a_planning_error(limits: Limits)
     start = np.array([600.0, 600.0, 600.0, 0.0, 0.0])
     with pytest.raises(PlanningError, match="ruckig could not plan the rapid"):
         plan_rapid(start, start + np.array([0.0, 0.0, 0.0, 0.0, 1.7e5]), limits)
+
+
+def test_a_sequence_the_tight_plan_cannot_certify_gets_the_safe_plan(
+        monkeypatch: pytest.MonkeyPatch, machine: vp.Machine, limits: Limits,
+        zigzag_path: tuple[np.ndarray, np.ndarray]) -> None:
+    """A sequence whose tight plan (own filter width, short cap reach) cannot be brought within
+    the limits is planned again the safe way (widest filter, long reach), not refused (found on
+    a 3M-point job)."""
+    joints, tip = zigzag_path
+    feed = np.full(len(joints) - 1, 100.0)
+    real = feed_planner._Planner.plan
+
+    def tight_fails(self: feed_planner._Planner) -> list:
+        plans = real(self)
+        return [PlanningError("tight plan failed", 0) for _ in plans] if self.erode < 0.5 else plans
+
+    monkeypatch.setattr(feed_planner._Planner, "plan", tight_fails)
+    plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
+    assert plan.filter_width == pytest.approx(1.25 * np.max(limits.acceleration / limits.jerk))
+    check_feed_plan(machine, plan, joints, tip, feed, limits)

@@ -74,9 +74,11 @@ logger = logging.getLogger(__name__)
 _ACC_MARGIN = 0.97  # share of the acceleration limits given to TOPP2 (the filter mixes neighbours)
 _JERK_CAP_MARGIN = 0.7  # share of the jerk limits for the centripetal-jerk velocity cap
 _FIR_FACTOR = 1.25  # widest filter: w = factor * max_j(a_j / J_j), where full acceleration is used
-# A cap holds over erode * w * (its own speed) of travel on either side of its point: tight first,
-# then, for the sequences whose tight plan cannot be brought within the limits, the safe reach.
-_ERODE = (0.1, 0.5)
+# Tries in turn (a sequence goes to the next only if the last could not be brought within every
+# limit): (erode, widest): a cap holds over erode * w * (its own speed) of travel on either side
+# of its point; widest: the filter is 1.25 max(a / J) wide instead of the sequence's own width.
+# The last is the safe setting of the planner before per-sequence widths.
+_TRIES = ((0.1, False), (0.5, True))
 _GRID_PER_WINDOW = 4  # target grid intervals per filter width, at the capped speed
 _MIN_INTERVALS = 32
 _MAX_INTERVALS_PER_BLOCK = 1.0  # grid intervals per block, on average at most (plus a constant)
@@ -196,13 +198,15 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
     valid = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
     if len(valid):
         chosen = _select(joints, tip, feed, first, valid)
-        plans = _Planner(_Batch.of(*chosen, limits, angular_feed, min_duration, jerk), engine, max_refinements,
-                         _ERODE[0]).plan()
-        again = np.array([k for k, plan in enumerate(plans) if isinstance(plan, PlanningError)], dtype=int)
-        if len(again):
-            retry = _Batch.of(*_select(*chosen, again), limits, angular_feed, min_duration, jerk)
-            for k, plan in zip(again, _Planner(retry, engine, max_refinements, _ERODE[1]).plan(), strict=True):
+        plans: list[FeedPlan | PlanningError] = [PlanningError("not planned")] * len(valid)
+        again = np.arange(len(valid))
+        for erode, widest in _TRIES:
+            batch = _Batch.of(*_select(*chosen, again), limits, angular_feed, min_duration, jerk)
+            for k, plan in zip(again, _Planner(batch, engine, max_refinements, erode, widest).plan(), strict=True):
                 plans[k] = plan
+            again = np.array([k for k in again if isinstance(plans[k], PlanningError)], dtype=int)
+            if not len(again):
+                break
         for r, plan in zip(valid, plans, strict=True):
             results[r] = plan
     return results  # type: ignore[return-value]
@@ -559,8 +563,9 @@ class _Planner:
     """All the sequences of a batch: grid and caps once, then TOPP2, filter and verification in
     rounds, each round over the sequences not yet within every limit."""
 
-    def __init__(self, batch: _Batch, engine: Engine, max_refinements: int, erode: float) -> None:
+    def __init__(self, batch: _Batch, engine: Engine, max_refinements: int, erode: float, widest: bool) -> None:
         self.batch, self.engine, self.solve, self.max_refinements = batch, engine, solver(engine), max_refinements
+        self.erode = erode
         lim = batch.limits
         count = batch.count
         path, s, bfirst = batch.path, batch.s, batch.bfirst
@@ -573,11 +578,12 @@ class _Planner:
         self.t_scale = np.maximum(t_est, 1e-6)
         # Filter width per sequence (module docstring, step 3): long enough to ramp the fastest
         # joint to its capped speed with its jerk limit, at most where full acceleration pays.
-        self.widest = widest = _FIR_FACTOR * float(np.max(lim.acceleration / lim.jerk))
+        self.widest = _FIR_FACTOR * float(np.max(lim.acceleration / lim.jerk))
         if batch.jerk:
             ramp = np.sqrt(np.max(np.abs(path(np.arange(len(bseq)), mids, 1)) * np.sqrt(x_mid) / lim.jerk[:, None],
                                   axis=0))
-            self.w = np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]), widest)
+            self.w = np.full(count, self.widest) if widest else np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]),
+                                                                           self.widest)
         else:
             self.w = np.zeros(count)
         blocks = np.diff(bfirst)
