@@ -33,15 +33,17 @@ planned in four steps:
    largest ``sqrt(|qdot_j| / J_j)`` over its capped joint speeds, at most
    ``1.25 max_j(a_j / J_j)`` (where full acceleration pays), and toppra's path acceleration
    bound is ``min(a_j, w J_j) / max |q_j'|`` over the window. The filtered speed mixes the speeds
-   within half a window of travel, so each cap is imposed over ``w / 2 * (its own speed)`` of
-   travel on either side (a step down of the feed is reached that much early).
+   within a window of travel, so each cap is imposed over ``0.1 w * (its own speed)`` of travel
+   on either side (a step down of the feed is reached that much early; the verification and its
+   local slow-downs take care of the rest).
 4. Verification of the exact trajectory (joint velocity, acceleration, jerk, tip feed, angular
    feed, analytic derivatives) at several samples of every polynomial piece of the time law and
    both sides of every waypoint. Where a limit is exceeded, the speed caps (excess due to speed
    and curvature) or the acceleration bound (excess due to path acceleration and jerk) are
    lowered around it in proportion and that sequence is planned again. A sequence that still
-   exceeds a limit after ``max_refinements`` rounds gets a :class:`PlanningError`: nothing is
-   returned unchecked.
+   exceeds a limit after ``max_refinements`` rounds is planned once more the safe way (the
+   widest filter, caps imposed over ``w / 2 * speed``); if that fails too it gets a
+   :class:`PlanningError`: nothing is returned unchecked.
 
 Every step is vectorised over all the sequences together (arrays concatenated, each element
 knowing its sequence); only the TOPP2 solve runs once per sequence. Positions within a sequence
