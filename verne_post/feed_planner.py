@@ -66,7 +66,7 @@ import numpy as np
 from scipy.interpolate import PPoly
 from scipy.linalg import solve_banded
 
-from .timing import DOF, TIP_EPS, Limits, PlanningError
+from .timing import DOF, TIP_EPS, Limits, PlanningError, checked_sequence
 from .topp import Engine, ToppError, solver
 
 __all__ = ["FeedPlan", "plan_feed", "plan_feeds"]
@@ -197,20 +197,14 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
     refused = _refusals(joints, first, limits, max_turn)
     for r, error in refused.items():
         results[r] = error
-    valid = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
-    if len(valid):
-        chosen = _select(joints, tip, feed, first, valid)
-        plans: list[FeedPlan | PlanningError] = [PlanningError("not planned")] * len(valid)
-        again = np.arange(len(valid))
-        for erode, widest in _TRIES:
-            batch = _Batch.of(*_select(*chosen, again), limits, angular_feed, min_duration, jerk)
-            for k, plan in zip(again, _Planner(batch, engine, max_refinements, erode, widest).plan(), strict=True):
-                plans[k] = plan
-            again = np.array([k for k in again if isinstance(plans[k], PlanningError)], dtype=int)
-            if not len(again):
-                break
-        for r, plan in zip(valid, plans, strict=True):
+    again = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
+    for erode, widest in _TRIES:
+        if not len(again):
+            break
+        batch = _Batch.of(*_select(joints, tip, feed, first, again), limits, angular_feed, min_duration, jerk)
+        for r, plan in zip(again, _Planner(batch, engine, max_refinements, erode, widest).plan(), strict=True):
             results[r] = plan
+        again = np.array([r for r in again if isinstance(results[r], PlanningError)], dtype=int)
     return results  # type: ignore[return-value]
 
 
@@ -398,37 +392,17 @@ def _range_max(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray
 
 def _concatenate(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Checked, concatenated (joints, tip, feed) and the waypoint offsets (R + 1,)."""
-    joints, tips, feeds = [], [], []
-    for r, (q, tip, feed) in enumerate(sequences):
-        q = np.asarray(q, dtype=float)
-        tip = np.asarray(tip, dtype=float)
-        feed = np.asarray(feed, dtype=float).reshape(-1)
-        where = f" (sequence {r})" if len(sequences) > 1 else ""
-        if q.ndim != 2 or q.shape[1] != DOF or len(q) < 2:
-            raise ValueError(f"joints must be (K + 1, 5) with K >= 1, got {q.shape}{where}")
-        if tip.shape != (len(q), 3):
-            raise ValueError(f"tip must be ({len(q)}, 3), got {tip.shape}{where}")
-        if feed.shape != (len(q) - 1,):
-            raise ValueError(f"feed must be ({len(q) - 1},) (one per block), got {feed.shape}{where}")
-        joints.append(q)
-        tips.append(tip)
-        feeds.append(feed)
+    """Checked (:func:`timing.checked_sequence`), concatenated (joints, tip, feed) and the
+    waypoint offsets (R + 1,)."""
+    checked = []
+    for r, sequence in enumerate(sequences):
+        try:
+            checked.append(checked_sequence(*sequence))
+        except ValueError as error:
+            raise ValueError(f"{error} (sequence {r})" if len(sequences) > 1 else str(error)) from None
+    joints, tips, feeds = zip(*checked, strict=True)
     first = np.r_[0, np.cumsum([len(q) for q in joints])]
-    q, tip, feed = np.concatenate(joints), np.concatenate(tips), np.concatenate(feeds)
-    block_first = first - np.arange(len(first))
-    for name, value, offset in (("joints", q, first), ("tip", tip, first), ("feed", feed, block_first)):
-        bad = np.flatnonzero(~np.all(np.isfinite(value.reshape(len(value), -1)), axis=1))
-        if len(bad):
-            r = int(np.searchsorted(offset, bad[0], side="right") - 1)
-            raise ValueError(f"{name} is not finite at index {bad[0] - offset[r]}"
-                             + (f" (sequence {r})" if len(sequences) > 1 else ""))
-    bad = np.flatnonzero(feed <= 0)
-    if len(bad):
-        r = int(np.searchsorted(block_first, bad[0], side="right") - 1)
-        raise ValueError(f"feed must be positive (mm/s), block {bad[0] - block_first[r]} has {feed[bad[0]]}"
-                         + (f" (sequence {r})" if len(sequences) > 1 else ""))
-    return q, tip, feed, first
+    return np.concatenate(joints), np.concatenate(tips), np.concatenate(feeds), first
 
 
 def _select(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, first: np.ndarray, which: np.ndarray
@@ -489,7 +463,8 @@ class _Batch:
         dq = joints[left + 1] - joints[left]
         weighted = np.linalg.norm(dq / limits.velocity, axis=1)
         s = np.zeros(len(joints))
-        s[left + 1] = _segment_cumsum(weighted, bfirst) / np.add.reduceat(weighted, bfirst[:-1])[bseq]
+        running = _segment_cumsum(weighted, bfirst)
+        s[left + 1] = running / running[bfirst[1:] - 1][bseq]
         s[first[1:] - 1] = 1.0
         ds = s[left + 1] - s[left]
         coef = np.ascontiguousarray(_not_a_knot(s, np.hstack([joints, tip]), first).transpose(0, 2, 1))
@@ -581,13 +556,14 @@ class _Planner:
         # Filter width per sequence (module docstring, step 3): long enough to ramp the fastest
         # joint to its capped speed with its jerk limit, at most where full acceleration pays.
         self.widest = _FIR_FACTOR * float(np.max(lim.acceleration / lim.jerk))
-        if batch.jerk:
-            ramp = np.sqrt(np.max(np.abs(path(np.arange(len(bseq)), mids, 1)) * np.sqrt(x_mid) / lim.jerk[:, None],
-                                  axis=0))
-            self.w = np.full(count, self.widest) if widest else np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]),
-                                                                           self.widest)
-        else:
+        if not batch.jerk:
             self.w = np.zeros(count)
+        elif widest:
+            self.w = np.full(count, self.widest)
+        else:
+            speed = np.abs(path(np.arange(len(bseq)), mids, 1)) * np.sqrt(x_mid)  # joints at the block caps
+            ramp = np.sqrt(np.max(speed / lim.jerk[:, None], axis=0))
+            self.w = np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]), self.widest)
         blocks = np.diff(bfirst)
         delta = (self.w if batch.jerk else np.full(count, 0.05)) / _GRID_PER_WINDOW
         delta = np.maximum(np.minimum(delta, t_est / _MIN_INTERVALS), t_est / (_MAX_INTERVALS_PER_BLOCK * blocks
@@ -651,7 +627,6 @@ class _Planner:
             self.umax = np.minimum(1.0 / _range_max(need, a, b), 1e300)
         piece = batch.path.locate(gseq, grid)
         self.q1, self.q2 = (d.T for d in batch.path.derivatives(piece, grid, (1, 2)))  # (G, 5)
-        self.gseq = gseq
 
     # -- rounds ---------------------------------------------------------------------------------
 
@@ -721,14 +696,6 @@ class _Planner:
         assert all(result is not None for result in results)
         return results  # type: ignore[return-value]
 
-    def _scaled(self, rows: np.ndarray, t0: np.ndarray, xmax: np.ndarray, acc_scale: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
-        """The TOPP2 problem at gridpoints ``rows`` in the time scale t0 (per gridpoint, s): caps,
-        path acceleration bound, and the joint acceleration rows divided by their limits."""
-        inverse = 1.0 / (acc_scale[rows, None] * self.batch.limits.acceleration[None, :] * t0[:, None] ** 2)
-        umax = acc_scale[rows] * self.umax[rows] * t0 ** 2 if self.batch.jerk else None
-        return np.maximum(xmax[rows], 0.0) * t0 ** 2, umax, self.q1[rows] * inverse, self.q2[rows] * inverse
-
     def _topp(self, r: int, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | PlanningError:
         """Squared path speeds (1/s^2) at the gridpoints of sequence r, time-optimal under xmax
         and the accelerations.
@@ -737,12 +704,15 @@ class _Planner:
         another time scale, with the acceleration limits 0.1 to 2 % lower (stricter, never looser).
         """
         g = slice(self.grid.first[r], self.grid.first[r + 1])
-        rows = np.arange(g.start, g.stop)
         failure = None
         for tighten, rescale in _RETRIES:
-            t0 = np.full(len(rows), self.t_scale[r] * rescale)
+            t0 = self.t_scale[r] * rescale
+            scale = acc_scale[g] * tighten
+            inverse = 1.0 / (scale[:, None] * self.batch.limits.acceleration[None, :] * t0 ** 2)
+            umax = scale * self.umax[g] * t0 ** 2 if self.batch.jerk else None
             try:
-                x = self.solve(self.grid.start[g], *self._scaled(rows, t0, xmax, acc_scale * tighten)) / t0 ** 2
+                x = self.solve(self.grid.start[g], np.maximum(xmax[g], 0.0) * t0 ** 2, umax, self.q1[g] * inverse,
+                               self.q2[g] * inverse) / t0 ** 2
             except ToppError as error:
                 failure = error
                 logger.debug("%s failed (accelerations x %s, time scale x %s): %s", self.engine, tighten, rescale,

@@ -105,8 +105,7 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     ranges = feed_sequences(joints, rapid, group, limits, corner)
     sequences = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in ranges]
     parts = max(1, min(workers, len(sequences) // _PER_PROCESS))
-    tasks = [(list(chunk), limits, rotary_feed, corner, jerk, engine)
-             for chunk in _split(sequences, parts)]
+    tasks = [(chunk, limits, rotary_feed, corner, jerk, engine) for chunk in _split(sequences, parts)]
     if parts > 1:
         context = multiprocessing.get_context("fork")
         with ProcessPoolExecutor(max_workers=parts, mp_context=context) as pool:

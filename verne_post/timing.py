@@ -76,7 +76,10 @@ def _check_limits(limits: Limits) -> Limits:
     return limits
 
 
-def _as_sequence(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def checked_sequence(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A feed sequence as float arrays, checked: joints (K + 1, 5) mm/rad, tip (K + 1, 3) mm,
+    feed (K,) mm/s, finite, feeds positive; else ValueError naming the first bad index."""
     joints = np.asarray(joints, dtype=float)
     tip = np.asarray(tip, dtype=float)
     feed = np.asarray(feed, dtype=float).reshape(-1)
@@ -141,7 +144,7 @@ def lower_bound_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limi
     length and F the block's feed; a rotary-only block (tip still) takes its slowest joint at
     its velocity limit, or its rotary angle at ``angular_feed`` (rad/s) where that is given.
     """
-    joints, tip, feed = _as_sequence(joints, tip, feed)
+    joints, tip, feed = checked_sequence(joints, tip, feed)
     limits = _check_limits(limits)
     return float(np.sum(_block_min_time(_blocks(joints, tip), feed, limits, angular_feed)))
 
@@ -161,7 +164,7 @@ def baseline_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits:
     joint displacement, capped by ``angular_feed`` (rad/s), and the machine stops before and
     after them (speeds in different units).
     """
-    joints, tip, feed = _as_sequence(joints, tip, feed)
+    joints, tip, feed = checked_sequence(joints, tip, feed)
     limits = _check_limits(limits)
     blocks = _blocks(joints, tip)
     weighted = np.linalg.norm(blocks.dq / limits.velocity, axis=1)
