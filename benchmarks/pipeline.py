@@ -6,12 +6,15 @@ Generates the 5-axis example at the given size (examples/generate_job.py; 100,00
 about 105,000 blocks) and times, as separate processes, each the median of ``--runs`` runs taken
 in turn (A B C A B C ..., so a drift of the machine's speed hits all three alike):
 
-  (a) ``verne-post job.cls -o job.nc -q``: every stage, planning and verification included;
+  (a) ``verne-post job.cls -o job.nc -q``: every stage, planning and verification included
+      (planning and verification in helper processes beside the main one, on 2+ cores);
   (b) the same with ``--report job.json``;
-  (c) LinuxCNC's ``rs274 -g`` alone reading the job.nc that (a) wrote, as verne_post.rs274 runs it.
+  (c) LinuxCNC's ``rs274 -g`` alone reading the job.nc that (a) wrote, as verne_post.rs274 runs it;
+  (d) (a) with ``--workers 1``: every stage in one process, the baseline of the helpers.
 
-Prints their seconds and the ratios (a)/(c) (target <= 4) and (b)/(a) (target <= 1.10), the
-planning speed in blocks/s (the report's ``seconds.timing``), and the report's stage timings.
+Prints their seconds and the ratios (a)/(c) (target <= 4), (b)/(a) (target <= 1.10) and
+(a)/(d), the planning speed in blocks/s (the report's ``seconds.timing``: the planning's own
+time, in whichever process it ran), and the report's stage timings.
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ def main() -> None:
             "a": [*post, "job.cls", "-o", "job.nc", "-q"],
             "b": [*post, "job.cls", "-o", "job_report.nc", "-q", "--report", "job.json"],
             "c": [rs274, "-g", "-t", "tools.tbl", "job.nc", "canon.txt"],
+            "d": [*post, "job.cls", "-o", "job_one.nc", "-q", "--workers", "1"],
         }
         times: dict[str, list[float]] = {key: [] for key in commands}
         for run in range(args.runs):
@@ -78,23 +82,28 @@ def main() -> None:
                 times[key].append(_seconds(command, folder, env))
         if "PROGRAM_END" not in (folder / "canon.txt").read_text()[-2000:]:
             raise SystemExit("rs274 did not read job.nc to its end")
+        if (folder / "job.nc").read_bytes() != (folder / "job_one.nc").read_bytes():
+            raise SystemExit("(a) and (d) wrote different programs")
         report = json.loads((folder / "job.json").read_text())
     median = {key: statistics.median(values) for key, values in times.items()}
     blocks, points = report["points"]["blocks"], report["points"]["cl"]
     stages = report["seconds"]
     print(f"job: {points:,} CL points -> {blocks:,} blocks; median of {args.runs} runs each, whole processes\n")
-    rows = [("(a) verne-post -o job.nc -q", "a"), ("(b) ... --report job.json", "b"), ("(c) rs274 -g job.nc", "c")]
+    rows = [("(a) verne-post -o job.nc -q", "a"), ("(b) ... --report job.json", "b"), ("(c) rs274 -g job.nc", "c"),
+            ("(d) (a) with --workers 1", "d")]
     for label, key in rows:
         spread = ", ".join(f"{t:.2f}" for t in times[key])
         print(f"{label:<30}{median[key]:>8.2f} s   {points / median[key]:>9,.0f} CL points/s   (runs: {spread})")
     print(f"\n(a) / (c) = {median['a'] / median['c']:.2f}  (target <= 4)")
     print(f"(b) / (a) = {median['b'] / median['a']:.3f}  (target <= 1.10)")
+    print(f"(a) / (d) = {median['a'] / median['d']:.3f}  (the helper processes against one process)")
     print(f"planning: {stages['timing']:.2f} s, {blocks / stages['timing']:,.0f} blocks/s (run (b)'s report)")
     print(f"\n{'stage (b)':<30}{'seconds':>8}")
     for stage, seconds in stages.items():
         print(f"{stage:<30}{seconds:>8.2f}")
     rest = times["b"][-1] - sum(stages.values())
-    print(f"{'rest':<30}{rest:>8.2f}   (start-up, report, writing, verification: that run's wall time minus the above)")
+    print(f"{'rest':<30}{rest:>8.2f}   (that run's wall time minus the above: start-up, and the overlap of the "
+          "helpers' stages, negative)")
 
 
 if __name__ == "__main__":

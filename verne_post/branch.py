@@ -275,10 +275,13 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (n,))
     in_cone = in_pole_cone(axis, cone)
     # Pair choice on reach, travel and rod clearance; margins only for the chosen solutions.
-    plus, minus = both_pairs(machine, tip, axis, lengths)
     if pairs is None:
+        plus, minus = both_pairs(machine, tip, axis, lengths)
         pairs = choose_pairs(PairAngles.of(plus), PairAngles.of(minus), sequence, in_cone)
-    chosen = plus.take(pairs.plus, minus)
+        chosen = plus.take(pairs.plus, minus)
+    else:  # only the chosen pair's IK (elementwise: the same numbers as taking them from both)
+        chosen = _pair_results(machine, tip, axis, lengths, np.where(pairs.plus, 1, -1), np.zeros(n),
+                               with_margins=False)
     defined = np.flatnonzero(~in_cone & np.isfinite(chosen.joints[:, 4]))
     theta2, added = np.zeros(n), np.full(n, np.nan)
     if defined.size:

@@ -442,6 +442,9 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
                      help="Write violations and statistics: JSON, or a self-contained HTML page when it ends "
                           "in .html."),
         *_choices_after_report,
+        click.option("--workers", type=Number(1, 1024, integer=True), default=os.cpu_count() or 1,
+                     show_default="the cores", help="Processes: with 2 or more, the planning and the verification "
+                                                    "run beside the other stages; 1 runs everything in this one."),
     ])
 
 

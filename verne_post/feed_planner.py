@@ -63,13 +63,11 @@ from functools import cached_property
 from typing import Literal
 
 import numpy as np
-from scipy.interpolate import PPoly
-from scipy.linalg import solve_banded
 
 from .timing import DOF, TIP_EPS, Limits, PlanningError, checked_sequence
 from .topp import Engine, ToppError, solver
 
-__all__ = ["FeedPlan", "plan_feed", "plan_feeds"]
+__all__ = ["Cubics", "FeedPlan", "plan_feed", "plan_feeds"]
 
 logger = logging.getLogger(__name__)
 
@@ -93,6 +91,33 @@ _SHRINK = 0.97  # extra factor applied when lowering caps after a violation
 
 
 @dataclass(frozen=True, eq=False)
+class Cubics:
+    """A piecewise cubic in one variable x: ``sum_k coef[k, i] (x - breaks[i])^(3 - k)`` on
+    [breaks[i], breaks[i + 1]), the end pieces extended beyond the ends (as scipy's ``PPoly``
+    with ``extrapolate=True``; numpy only, so that posting does not import scipy.interpolate).
+
+    ``breaks`` (P + 1,) increasing; ``coef`` (4, P) scalar values or (4, P, D) vector values.
+    """
+
+    breaks: np.ndarray
+    coef: np.ndarray
+
+    def __call__(self, x: np.ndarray, nu: int = 0) -> np.ndarray:
+        """Derivative ``nu`` (0..3) at ``x`` (n,): (n,) or (n, D)."""
+        x = np.asarray(x, dtype=float)
+        piece = np.clip(np.searchsorted(self.breaks, x, side="right") - 1, 0, len(self.breaks) - 2)
+        tau = x - self.breaks[piece]
+        if self.coef.ndim == 3:
+            tau = tau[:, None]
+        c = np.take(self.coef, piece, axis=1)
+        weights = _DERIVATIVE_WEIGHTS[nu]
+        value = weights[0] * c[0]
+        for k, weight in enumerate(weights[1:], start=1):
+            value = value * tau + weight * c[k]
+        return value
+
+
+@dataclass(frozen=True, eq=False)
 class FeedPlan:
     """Time law of one feed sequence.
 
@@ -105,8 +130,8 @@ class FeedPlan:
     durations: np.ndarray  # (K,) s
     block_times: np.ndarray  # (K + 1,) s, block_times[0] = 0, block_times[-1] = total
     waypoint_s: np.ndarray  # (K + 1,) path parameter of the waypoints, 0 .. 1
-    path: PPoly  # q(s): (5,) mm/rad, a cubic per block
-    profile: PPoly  # s(t)
+    path: Cubics  # q(s): (5,) mm/rad, a cubic per block
+    profile: Cubics  # s(t)
     filter_width: float  # s, width of the jerk filter (0 without jerk limiting)
     gridpoints: int  # TOPP2 gridpoints used
     refinements: int  # local cap reductions needed to meet every limit
@@ -343,6 +368,8 @@ def _not_a_knot(x: np.ndarray, y: np.ndarray, first: np.ndarray) -> np.ndarray:
     banded[0, 1:] = upper[:-1]
     banded[1] = diag
     banded[2, :-1] = lower[1:]
+    from scipy.linalg import solve_banded  # here: importing scipy costs ~0.3 s, paid where planning runs
+
     m = solve_banded((1, 1), banded, rhs)
     block = np.flatnonzero(~last)  # block b starts at node b (global node index)
     h = dx[block][:, None]
@@ -963,11 +990,9 @@ class _Planner:
         batch = self.batch
         block_times = times[0][times[1][k]:times[1][k + 1]].copy()
         b0, b1 = profiles.bfirst[k], profiles.bfirst[k + 1]
-        profile = PPoly.construct_fast(np.ascontiguousarray(profiles.coef[:, b0 - k:b1 - k - 1]),
-                                       profiles.breaks[b0:b1].copy(), extrapolate=True)
+        profile = Cubics(profiles.breaks[b0:b1].copy(), np.ascontiguousarray(profiles.coef[:, b0 - k:b1 - k - 1]))
         w = slice(batch.wfirst[r], batch.wfirst[r + 1])
         blocks = batch.path.coef[..., batch.bfirst[r]:batch.bfirst[r + 1]]
-        path = PPoly.construct_fast(np.ascontiguousarray(blocks.transpose(0, 2, 1)),
-                                    batch.s[w].copy(), extrapolate=True)
+        path = Cubics(batch.s[w].copy(), np.ascontiguousarray(blocks.transpose(0, 2, 1)))
         return FeedPlan(np.diff(block_times), block_times, batch.s[w].copy(), path, profile, float(self.w[r]),
                         int(self.grid.first[r + 1] - self.grid.first[r]), attempt, peaks)

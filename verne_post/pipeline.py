@@ -26,6 +26,7 @@ import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
@@ -40,6 +41,7 @@ from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
 from .errors import OutputError
 from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
+from .helpers import Helper, VerifierProcess
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
@@ -307,27 +309,83 @@ PART_POSES = 20_000
 
 
 @dataclass(frozen=True)
+class Timing:
+    """Stage 6 of a part: the block durations (s), the schedule they come from (None: not
+    planned, the durations then from the programmed feeds), what could not be planned, and the
+    seconds the planning took."""
+
+    duration: np.ndarray
+    schedule: Schedule | None = None
+    violations: tuple[Violation, ...] = ()
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class TimingTask:
+    """What the planning of a part needs (:func:`plan_timing`), small enough to send to a
+    helper process: the part's moving blocks (mm, rad), their feeds (mm/s) and CL lines."""
+
+    joints: np.ndarray
+    tip: np.ndarray
+    rapid: np.ndarray
+    feed: np.ndarray
+    group: np.ndarray
+    line: np.ndarray
+    unplanned: np.ndarray  # s: the durations from the programmed feeds, where planning fails
+    limits: Limits
+    rotary_feed: float  # rad/s
+    corner: float  # rad
+    engine: Engine
+    workers: int
+
+
+def plan_timing(task: TimingTask) -> Timing:
+    """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.schedule.plan_program`)."""
+    start = time.perf_counter()
+    try:
+        schedule = plan_program(task.joints, task.tip, task.rapid, task.feed, task.group, task.limits,
+                                rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
+                                engine=task.engine)
+    except SequenceError as error:
+        violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
+        return Timing(task.unplanned, None, (violation,), time.perf_counter() - start)
+    return Timing(schedule.duration, schedule, (), time.perf_counter() - start)
+
+
+#: Plans a part's timing: here (:func:`plan_timing`), or in a helper process (a future of it).
+Planner = Callable[[TimingTask], "Timing | Future[Timing]"]
+
+
+@dataclass(frozen=True)
 class Part:
     """Poses ``first`` to ``end - 1`` through stages 3 to 5; ``blocks`` (pose indices of the whole
     program) without those that move no joint, ``context`` of them (0 or 1) being the last block
-    of the part before, there for the motion from it (``schedule`` counts it too)."""
+    of the part before, there for the motion from it (the schedule counts it too). Its timing
+    may still be under way in a helper process: :meth:`timed`."""
 
     first: int
     end: int
     path: PathIK
     blocks: Blocks
     rapid: np.ndarray
-    duration: np.ndarray  # s
-    schedule: Schedule | None
+    unplanned: np.ndarray  # s: block durations from the programmed feeds
+    planning: Timing | Future[Timing] | None  # None: not planned
     context: int
     checks: list[Violation]  # stage 3 checks, one per line and kind
     others: list[Violation]  # paths out of tolerance, angle pair switches
-    timing: list[Violation]
     warnings: list[str]
 
     @property
     def own(self) -> slice:
         return slice(self.context, None)
+
+    def timed(self, wanted: bool = True) -> Timing:
+        """The part's timing (waits for the helper); not ``wanted``: as if it had not been planned."""
+        if self.planning is None or not wanted:
+            if isinstance(self.planning, Future):
+                self.planning.cancel()
+            return Timing(self.unplanned)
+        return self.planning.result() if isinstance(self.planning, Future) else self.planning
 
 
 def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
@@ -369,9 +427,10 @@ def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: Pa
 
 
 def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: int, lap: Callable[[str], None],
-           plan: Callable[[list[Violation]], bool]) -> Iterator[Part]:
-    """Stages 3 to 5 of each part in turn (one part when ``size`` covers the program);
-    ``plan(violations)``: whether to plan the timing of a part with these violations."""
+           plan: bool, planner: Planner = plan_timing) -> Iterator[Part]:
+    """Stages 3 to 5 of each part in turn (one part when ``size`` covers the program), and the
+    timing of each handed to ``planner``; ``plan``: plan the timing of the parts, up to the
+    first with a violation of stages 3 to 5."""
     n = len(poses)
     pairs = None if size >= n else _choose_pairs(machine, poses, size)
     state = BranchState()
@@ -414,20 +473,16 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
         blocks, rapid = blocks.rows(moving), rapid[moving]
         duration = block_durations(machine, poses, blocks, rapid)
-        schedule, timing = None, []
-        if plan(checks + others):
-            try:
-                schedule = plan_program(blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration),
-                                        poses.sequence[blocks.pose], Limits.from_machine(machine),
-                                        rotary_feed=np.radians(machine.timing.rotary_feed) / 60.0,
-                                        corner=np.radians(machine.timing.corner_angle), workers=options.workers,
-                                        engine=options.planner)
-                duration = schedule.duration
-            except SequenceError as error:
-                timing.append(Violation(int(poses.line[blocks.pose[error.block]]), "timing",
-                                        f"cannot plan the feed motion: {error}"))
+        plan = plan and not (checks or others)
+        planning = None
+        if plan:
+            planning = planner(TimingTask(
+                blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration), poses.sequence[blocks.pose],
+                poses.line[blocks.pose], duration, Limits.from_machine(machine),
+                np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
+                options.planner, options.workers))
             lap("timing")
-        yield Part(first, cut, path, blocks, rapid, duration, schedule, context, checks, others, timing, warnings)
+        yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
         before = (blocks.rows(slice(-1, None)), bool(rapid[-1]))
         first = cut
@@ -509,20 +564,20 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     clock = _Clock(progress)
     poses, options, placement = _machine_poses(path, machine, options, clock)
     feasible = placement is None or placement.feasible
-    part = next(_parts(machine, poses, options, len(poses), clock.lap,
-                       plan=lambda found: options.plan and feasible and not found))
-    violations = _violations(part.checks, part.others, part.timing, placement)
+    part = next(_parts(machine, poses, options, len(poses), clock.lap, plan=options.plan and feasible))
+    timing = part.timed()
+    violations = _violations(part.checks, part.others, list(timing.violations), placement)
     warnings = list(poses.warnings) + part.warnings
     if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
         warnings.append(_cone_warning(machine, options, poses.source))
     program = None
     if not violations:
         figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction < 1)),
-                          time=float(np.sum(part.duration)))
-        program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, part.duration,
+                          time=float(np.sum(timing.duration)))
+        program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, timing.duration,
                          _at_blocks(_events(poses), part.blocks))
-    return PostResult(poses, part.path, part.blocks, part.rapid, part.duration, violations, warnings, program,
-                      part.schedule, clock.seconds, placement)
+    return PostResult(poses, part.path, part.blocks, part.rapid, timing.duration, violations, warnings, program,
+                      timing.schedule, clock.seconds, placement)
 
 
 @dataclass
@@ -560,13 +615,65 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     the report (time budget, ratios to the limits), which cost time. After a violation the
     remaining parts are still checked (every violation is reported) but no longer planned.
     ``before_writing`` gets the outcome before the output is written (and may stop it, raising).
+
+    With ``options.workers`` > 1 the planning and the verification run in helper processes
+    (:mod:`verne_post.helpers`), a part behind the main process, which solves the next part
+    meanwhile: the same program, sooner. The seconds of ``timing`` and ``verify`` are then the
+    helpers' (overlapping the others), ``waiting`` the main process's wait for them.
     """
-    clock = _Clock(progress)
-    poses, options, placement = _machine_poses(path, machine, options, clock)
+    with contextlib.ExitStack() as helpers:
+        planner: Planner = plan_timing
+        if options.workers > 1 and options.plan:  # started first: it imports scipy while the CL file is read
+            planning = Helper(("scipy.linalg",))
+            helpers.callback(planning.close)
+            planner = _HelpedPlanner(planning)
+        clock = _Clock(progress)
+        poses, options, placement = _machine_poses(path, machine, options, clock)
+        verifier: Verifier | VerifierProcess | None = None
+        if verify and output is not None:
+            settings = {"source": str(output), "tol": options.tol, "axis_tol": options.axis_tol,
+                        "work_offset": _offset(machine, options)}
+            if options.workers > 1:
+                verifier = VerifierProcess(machine, **settings)
+                helpers.callback(verifier.close)
+            else:
+                verifier = Verifier(machine, **settings)
+        return _post(machine, poses, options, placement, output, clock, planner, verifier, timing_figures, part_poses,
+                     before_writing)
+
+
+class _HelpedPlanner:
+    """Plans in a helper process, or here while the helper is still busy with the part before
+    (the main process would only wait for it): both cores plan, and the plans are the same."""
+
+    def __init__(self, helper: Helper) -> None:
+        self.helper = helper
+        self.pending: Future[Timing] | None = None
+
+    def __call__(self, task: TimingTask) -> Timing | Future[Timing]:
+        if self.pending is not None and not self.pending.done():
+            return plan_timing(task)
+        self.pending = self.helper.submit(plan_timing, replace(task, workers=1))  # the helper is one process
+        return self.pending
+
+
+def _one_ahead(parts: Iterator[Part]) -> Iterator[Part]:
+    """The parts, each handed on once the next has been made (its planning under way)."""
+    current = next(parts, None)
+    for following in parts:
+        yield current  # type: ignore[misc]
+        current = following
+    if current is not None:
+        yield current
+
+
+def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement: Placement | None,
+          output: str | os.PathLike[str] | None, clock: _Clock, planner: Planner,
+          verifier: Verifier | VerifierProcess | None, timing_figures: bool, part_poses: int,
+          before_writing: Callable[[Posted], None]) -> Posted:
+    """:func:`post` once the poses are known."""
     fmt = gcode_format(machine)
     writer = GcodeWriter(fmt)
-    verifier = Verifier(machine, source=str(output), tol=options.tol, axis_tol=options.axis_tol,
-                        work_offset=_offset(machine, options)) if verify and output is not None else None
     # the header's figures are known at the end: the head is verified with those of an empty program
     head = writer.head(_frame(machine, poses, options, placement, Figures()))
     events, tools = _events(poses), {t.number: (t.length, t.delta) for t in poses.tools}
@@ -577,39 +684,45 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     warnings = list(poses.warnings)
     in_cone = False
     failed = placement is not None and not placement.feasible
-
-    def plan(found: list[Violation]) -> bool:
-        return options.plan and not failed and not found
-
+    helped = planner is not plan_timing
+    parts = _parts(machine, poses, options, part_poses, clock.lap, options.plan and not failed, planner)
     with _spool(output) as spool:
-        for k, part in enumerate(_parts(machine, poses, options, part_poses, clock.lap, plan)):
-            failed = failed or bool(part.checks or part.others or part.timing)
+        for k, part in enumerate(_one_ahead(parts) if helped else parts):
+            timed = part.timed(wanted=not failed)  # a part after a failed one: as if not planned
+            if isinstance(part.planning, Future):  # planned in the helper
+                clock.seconds["timing"] = clock.seconds.get("timing", 0.0) + timed.seconds
+                clock.lap("waiting")
+            failed = failed or bool(part.checks or part.others or timed.violations)
             if len(checks) + len(others) < MAX_VIOLATIONS:  # a program wrong everywhere: enough to say so
                 checks += part.checks
                 others += part.others
-            timing += part.timing
-            figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, part.duration,
-                        part.schedule, timing_figures, part.context)
+            timing += timed.violations
+            figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, timed.duration,
+                        timed.schedule, timing_figures, part.context)
             warnings += part.warnings
             in_cone = in_cone or bool(part.path.in_cone.any())
             if output is not None and not failed:
                 own, last = part.own, part.end == len(poses)
                 blocks = part.blocks.rows(own)
                 mine = [e for e in events if part.first <= e.index < part.end or (last and e.index >= part.end)]
-                text = "".join(writer.body(Program(blocks.joints, part.rapid[own], part.duration[own],
+                text = "".join(writer.body(Program(blocks.joints, part.rapid[own], timed.duration[own],
                                                    poses.line[blocks.pose], _at_blocks(mine, blocks),
                                                    tool_lengths=tools)))
                 spool.write(text)
                 clock.lap("write")
                 if verifier is not None:
-                    verifier.read((head if k == 0 else "") + text + (writer.tail() if last else ""),
-                                  Reference.of(poses.part(part.first, part.end)), final=last)
+                    reference = Reference.of(poses.part(part.first, part.end))
+                    verifier.read((head if k == 0 else "") + text + (writer.tail() if last else ""), reference,
+                                  final=last)
                     clock.lap("verify")
             clock.progress(f"pose {part.end} of {len(poses)}")
         if in_cone and machine.pole.cone > options.axis_tol:
             warnings.append(_cone_warning(machine, options, poses.source))
         violations = _violations(checks, others, timing, placement)
         verification = verifier.result() if verifier is not None and not violations else None
+        if isinstance(verifier, VerifierProcess) and verification is not None:
+            clock.lap("waiting")
+            clock.seconds["verify"] = clock.seconds.get("verify", 0.0) + verifier.seconds
         posted = Posted(poses, violations, warnings, figures, verification, k + 1, clock.seconds, placement)
         before_writing(posted)
         if output is not None and not violations and (verification is None or verification.ok):

@@ -218,10 +218,18 @@ class RapidPlan:
     end: np.ndarray  # (5,) mm, rad
     duration: float  # s (0 for a move of zero length)
     trajectory: Trajectory | None  # ruckig trajectory (None for a move of zero length)
+    limits: Limits | None = None  # what it was planned with
 
     @property
     def total(self) -> float:
         return self.duration
+
+    def __reduce__(self) -> tuple:
+        # ruckig's Trajectory cannot be pickled: a plan sent between processes is planned
+        # again from its ends and limits on arrival (ruckig is deterministic: the same plan).
+        if self.trajectory is None or self.limits is None:
+            return RapidPlan, (self.start, self.end, self.duration, None, self.limits)
+        return plan_rapid, (self.start, self.end, self.limits)
 
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Joint positions, velocities, accelerations (n, 5) at times ``t`` (s, clipped to 0..duration)."""
@@ -246,7 +254,7 @@ def plan_rapid(start: np.ndarray, end: np.ndarray, limits: Limits) -> RapidPlan:
     if not (np.all(np.isfinite(start)) and np.all(np.isfinite(end))):
         raise ValueError("start and end must be finite")
     if np.all(np.abs(end - start) <= 1e-12 * np.maximum(1.0, np.abs(start))):
-        return RapidPlan(start, start.copy(), 0.0, None)
+        return RapidPlan(start, start.copy(), 0.0, None, limits)
     inp = InputParameter(DOF)
     inp.current_position = start.tolist()
     inp.current_velocity = [0.0] * DOF
@@ -266,4 +274,4 @@ def plan_rapid(start: np.ndarray, end: np.ndarray, limits: Limits) -> RapidPlan:
                             ) from error
     if result not in (Result.Working, Result.Finished):
         raise PlanningError(f"ruckig could not plan the rapid from {start.tolist()} to {end.tolist()}: {result}")
-    return RapidPlan(start, end, float(trajectory.duration), trajectory)
+    return RapidPlan(start, end, float(trajectory.duration), trajectory, limits)

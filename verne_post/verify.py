@@ -41,7 +41,6 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .api import JOINT_NAMES, classify, forward_kinematics, joint_bounds, pose_margins
 from .gcode_reader import GcodeProgram, ReadState, read_gcode
@@ -648,6 +647,8 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     # tip and axis together (the axis scaled so that axis_tol weighs as much as tol): the block
     # ends of a rotation on the spot share their tip but not their axis
     weight = tol / axis_tol
+    from scipy.spatial import cKDTree  # here: scipy costs ~0.3 s to import, paid only by a verification
+
     tree = cKDTree(np.hstack([ends.tip[usable], weight * ends.axis[usable]]))
     query = np.hstack([reference.tip, weight * reference.axis])
     radius = math.sqrt(2) * tol

@@ -1,0 +1,97 @@
+"""Helper processes of :func:`verne_post.pipeline.post`: on a machine with more than one core, a
+long program's planning (stage 6) and verification (stage 7) run beside the main process, which
+meanwhile solves, checks and writes the next part.
+
+A helper is a forked process that runs what it is handed in the order it was handed (a process
+pool of one worker), so the verifier keeps where its reading of the program stands from one part
+to the next. Each helper imports what only it needs (scipy, ~0.3 s a module) as it starts, while
+the main process is still reading the CL file. The results are the bits the main process would
+have computed: the same code on the same numbers (tests/test_parts.py).
+"""
+
+from __future__ import annotations
+
+import importlib
+import multiprocessing
+import signal
+import time
+from collections.abc import Callable
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Any, TypeVar
+
+from .machine import Machine
+from .verify import Reference, Verification, Verifier
+
+T = TypeVar("T")
+
+
+def _start(modules: tuple[str, ...], then: Callable[..., None] | None, args: tuple) -> None:
+    # Ctrl-C is the main process's to handle (it stops the helpers): no traceback from a helper.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in modules:
+        importlib.import_module(name)
+    if then is not None:
+        then(*args)
+
+
+def _started() -> None:
+    """Nothing: the first call a helper gets, so that it starts (and imports) at once."""
+
+
+class Helper:
+    """A forked process that runs the calls handed to it in turn; ``imports`` are imported, then
+    ``initializer(*initargs)`` is called, as it starts (with fork nothing is pickled for that)."""
+
+    def __init__(self, imports: tuple[str, ...] = (), initializer: Callable[..., None] | None = None,
+                 initargs: tuple = ()) -> None:
+        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
+                                         initializer=_start, initargs=(imports, initializer, initargs))
+        self._pool.submit(_started)
+
+    def submit(self, function: Callable[..., T], *args: Any) -> Future[T]:
+        """Run ``function(*args)`` there, after everything handed over before."""
+        return self._pool.submit(function, *args)
+
+    def close(self) -> None:
+        """Stop: what has not started is dropped (a failed run needs none of it)."""
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+_verifier: Verifier | None = None  # the verifier of the helper process it lives in
+
+
+def _new_verifier(machine: Machine, settings: dict[str, Any]) -> None:
+    global _verifier
+    _verifier = Verifier(machine, **settings)
+
+
+def _read(text: str, reference: Reference | None, final: bool) -> float:
+    assert _verifier is not None
+    start = time.perf_counter()
+    _verifier.read(text, reference, final)
+    return time.perf_counter() - start
+
+
+def _result() -> Verification:
+    assert _verifier is not None
+    return _verifier.result()
+
+
+class VerifierProcess:
+    """A :class:`~verne_post.verify.Verifier` in a helper process: :meth:`read` hands a part over
+    and returns at once, :meth:`result` waits for every part (and raises what a reading raised)."""
+
+    def __init__(self, machine: Machine, **settings: Any) -> None:
+        self._helper = Helper(("scipy.spatial",), _new_verifier, (machine, settings))
+        self._reads: list[Future[float]] = []
+        self.seconds = 0.0  # spent verifying, once :meth:`result` has been called
+
+    def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
+        self._reads.append(self._helper.submit(_read, text, reference, final))
+
+    def result(self) -> Verification:
+        self.seconds = sum(read.result() for read in self._reads)
+        return self._helper.submit(_result).result()
+
+    def close(self) -> None:
+        self._helper.close()
