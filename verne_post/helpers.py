@@ -53,16 +53,25 @@ class Helper:
         return self._pool.submit(function, *args)
 
     def close(self) -> None:
-        """Stop: what has not started is dropped (a failed run needs none of it)."""
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop, once what is under way is done: what has not started is dropped (a failed run
+        needs none of it). Waiting matters: a pool left running into the interpreter's exit
+        can fail there with an OSError printed to stderr."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
 
-_verifier: Verifier | None = None  # the verifier of the helper process it lives in
+_machine: Machine | None = None  # the machine of the verifier helper it lives in (inherited, not pickled)
+_verifier: Verifier | None = None  # its verifier
 
 
-def _new_verifier(machine: Machine, settings: dict[str, Any]) -> None:
+def _keep(machine: Machine) -> None:
+    global _machine
+    _machine = machine
+
+
+def _new_verifier(settings: dict[str, Any]) -> None:
     global _verifier
-    _verifier = Verifier(machine, **settings)
+    assert _machine is not None
+    _verifier = Verifier(_machine, **settings)
 
 
 def _read(text: str, reference: Reference | None, final: bool) -> float:
@@ -78,19 +87,26 @@ def _result() -> Verification:
 
 
 class VerifierProcess:
-    """A :class:`~verne_post.verify.Verifier` in a helper process: :meth:`read` hands a part over
-    and returns at once, :meth:`result` waits for every part (and raises what a reading raised)."""
+    """A :class:`~verne_post.verify.Verifier` in a helper process, started before its settings
+    are known (the work offset comes after placement): :meth:`start` gives them, :meth:`read`
+    hands a part over and returns at once, :meth:`result` waits for every part (and raises
+    what a reading raised)."""
 
-    def __init__(self, machine: Machine, **settings: Any) -> None:
-        self._helper = Helper(("scipy.spatial",), _new_verifier, (machine, settings))
+    def __init__(self, machine: Machine) -> None:
+        self._helper = Helper(("scipy.spatial",), _keep, (machine,))
         self._reads: list[Future[float]] = []
         self.seconds = 0.0  # spent verifying, once :meth:`result` has been called
+
+    def start(self, **settings: Any) -> VerifierProcess:
+        """The settings of :class:`~verne_post.verify.Verifier` (source, tolerances, work offset)."""
+        self._reads.append(self._helper.submit(_new_verifier, settings))
+        return self
 
     def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
         self._reads.append(self._helper.submit(_read, text, reference, final))
 
     def result(self) -> Verification:
-        self.seconds = sum(read.result() for read in self._reads)
+        self.seconds = sum(read.result() or 0.0 for read in self._reads)
         return self._helper.submit(_result).result()
 
     def close(self) -> None:

@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
 
@@ -305,7 +306,7 @@ MAX_VIOLATIONS = 20_000
 
 #: CL poses per part of a program (:func:`post`): a part ends where the machine stops, at a
 #: rapid or between feed sequences, at the last such place among this many poses.
-PART_POSES = 20_000
+PART_POSES = 10_000
 
 
 @dataclass(frozen=True)
@@ -621,40 +622,30 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     meanwhile: the same program, sooner. The seconds of ``timing`` and ``verify`` are then the
     helpers' (overlapping the others), ``waiting`` the main process's wait for them.
     """
-    with contextlib.ExitStack() as helpers:
+    verify = verify and output is not None
+    with contextlib.ExitStack() as helpers:  # started first: they import scipy while the CL file is read
         planner: Planner = plan_timing
-        if options.workers > 1 and options.plan:  # started first: it imports scipy while the CL file is read
+        if options.workers > 1 and options.plan:
             planning = Helper(("scipy.linalg",))
             helpers.callback(planning.close)
-            planner = _HelpedPlanner(planning)
+            planner = partial(_plan_in, planning)
+        verifying = None
+        if options.workers > 1 and verify:
+            verifying = VerifierProcess(machine)
+            helpers.callback(verifying.close)
         clock = _Clock(progress)
         poses, options, placement = _machine_poses(path, machine, options, clock)
         verifier: Verifier | VerifierProcess | None = None
-        if verify and output is not None:
+        if verify:
             settings = {"source": str(output), "tol": options.tol, "axis_tol": options.axis_tol,
                         "work_offset": _offset(machine, options)}
-            if options.workers > 1:
-                verifier = VerifierProcess(machine, **settings)
-                helpers.callback(verifier.close)
-            else:
-                verifier = Verifier(machine, **settings)
+            verifier = Verifier(machine, **settings) if verifying is None else verifying.start(**settings)
         return _post(machine, poses, options, placement, output, clock, planner, verifier, timing_figures, part_poses,
                      before_writing)
 
 
-class _HelpedPlanner:
-    """Plans in a helper process, or here while the helper is still busy with the part before
-    (the main process would only wait for it): both cores plan, and the plans are the same."""
-
-    def __init__(self, helper: Helper) -> None:
-        self.helper = helper
-        self.pending: Future[Timing] | None = None
-
-    def __call__(self, task: TimingTask) -> Timing | Future[Timing]:
-        if self.pending is not None and not self.pending.done():
-            return plan_timing(task)
-        self.pending = self.helper.submit(plan_timing, replace(task, workers=1))  # the helper is one process
-        return self.pending
+def _plan_in(helper: Helper, task: TimingTask) -> Future[Timing]:
+    return helper.submit(plan_timing, replace(task, workers=1))  # the helper is one process
 
 
 def _one_ahead(parts: Iterator[Part]) -> Iterator[Part]:

@@ -106,10 +106,11 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     sequences = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in ranges]
     parts = max(1, min(workers, len(sequences) // _PER_PROCESS))
     tasks = [(chunk, limits, rotary_feed, corner, jerk, engine) for chunk in _split(sequences, parts)]
-    if parts > 1:
+    if parts > 1:  # this process plans the first share while the others are planned beside it
         context = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=parts, mp_context=context) as pool:
-            plans = [plan for chunk in pool.map(_plan_sequences, tasks) for plan in chunk]
+        with ProcessPoolExecutor(max_workers=parts - 1, mp_context=context) as pool:
+            others = pool.map(_plan_sequences, tasks[1:])
+            plans = [plan for chunk in (_plan_sequences(tasks[0]), *others) for plan in chunk]
     else:
         plans = [plan for task in tasks for plan in _plan_sequences(task)]
     planned: list[tuple[int, int, bool, FeedPlan | RapidPlan]] = []
