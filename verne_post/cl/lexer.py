@@ -14,7 +14,9 @@ The lexer knows the *syntax* every CAM family shares and nothing of what a recor
 - NX "Information listing" headers (before the first record) and ``Tool Path Listing has N lines``
   trailers are skipped; their fields are TAB- or space-separated.
 
-Each record is yielded as a :class:`Record` (word, argument text, 1-based first line).
+Each record is yielded as a :class:`Record` (word, argument text, 1-based first line);
+:func:`record_runs` yields the same records with runs of plain one-line ``GOTO/`` records
+gathered into a :class:`GotoRun` (most of any file), for the reader's bulk route.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import re
 from collections.abc import Iterable, Iterator
 from typing import NamedTuple
 
-__all__ = ["TEXT_RECORDS", "Record", "iter_lines", "records", "split_lines"]
+__all__ = ["TEXT_RECORDS", "GotoRun", "Record", "iter_lines", "record_runs", "records", "split_lines"]
 
 TEXT_RECORDS = frozenset({"PPRINT", "PARTNO", "INSERT"})
 
@@ -43,6 +45,21 @@ class Record(NamedTuple):
     args: str
     line: int
 
+
+class GotoRun(NamedTuple):
+    """Consecutive one-line ``GOTO/`` records (only blank, comment or skipped lines between them):
+    their argument texts and line numbers."""
+
+    args: list[str]
+    lines: list[int]
+
+    def records(self, start: int = 0) -> Iterator[Record]:
+        """Its records from the ``start``-th on."""
+        return (Record("GOTO", a, n) for a, n in zip(self.args[start:], self.lines[start:], strict=True))
+
+
+#: GOTO records gathered into one run at most (memory stays bounded on a file of millions).
+_RUN = 4096
 
 #: Characters of text split into lines at once (:func:`iter_lines`).
 _BLOCK = 1 << 20
@@ -80,10 +97,21 @@ def _make(body: str, line: int) -> Record | None:
 
 def records(lines: Iterable[str]) -> Iterator[Record]:
     """The logical records of ``lines`` in file order (see the module docstring)."""
+    for item in record_runs(lines):
+        if isinstance(item, GotoRun):
+            yield from item.records()
+        else:
+            yield item
+
+
+def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
+    """:func:`records`, with the plain one-line GOTOs gathered into runs (:class:`GotoRun`)."""
     pending: list[str] | None = None  # parts of a record continued with '$'
     pending_line = 0
     in_comment = False  # a '$$' comment continued with '$'
     seen_record = False
+    run_args: list[str] = []
+    run_lines: list[int] = []
     for lineno, raw in enumerate(lines, 1):
         if in_comment:
             # Creo continues a '$$->' comment onto plain lines of numbers; a record ends it.
@@ -94,7 +122,11 @@ def records(lines: Iterable[str]) -> Iterator[Record]:
             in_comment = False
         if pending is None and raw[:5] == "GOTO/" and "$" not in raw:
             seen_record = True
-            yield Record("GOTO", raw[5:], lineno)  # the common case, kept cheap
+            run_args.append(raw[5:])  # the common case, kept cheap
+            run_lines.append(lineno)
+            if len(run_args) >= _RUN:
+                yield GotoRun(run_args, run_lines)
+                run_args, run_lines = [], []
             continue
         if pending is None:
             s = raw.strip()
@@ -106,6 +138,9 @@ def records(lines: Iterable[str]) -> Iterator[Record]:
             text = _TEXT_HEAD_RE.match(s)
             if text is not None:
                 seen_record = True
+                if run_args:
+                    yield GotoRun(run_args, run_lines)
+                    run_args, run_lines = [], []
                 yield Record(text.group(1).upper(), s[text.end():].strip(), lineno)
                 continue
             if _TRAILER_RE.match(s) or (not seen_record and _HEADER_RE.match(s)):
@@ -126,6 +161,11 @@ def records(lines: Iterable[str]) -> Iterator[Record]:
         record = _make(body, line)
         if record is not None:
             seen_record = True
+            if run_args:
+                yield GotoRun(run_args, run_lines)
+                run_args, run_lines = [], []
             yield record
+    if run_args:
+        yield GotoRun(run_args, run_lines)
     if pending is not None:
         yield Record("$", "", pending_line)  # an unfinished continuation: the reader reports it

@@ -32,6 +32,7 @@ line where the offending record starts.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import re
@@ -49,7 +50,7 @@ from verne_post.toolpath import Toolpath
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes
 from .dialects import ArcDirection, FrameMode, detect_dialect
-from .lexer import Record, iter_lines, records
+from .lexer import GotoRun, Record, iter_lines, record_runs
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -186,59 +187,112 @@ class _Subroutines:
         return words[0].removesuffix(".0") if words[0].replace(".", "").isdigit() else words[0]
 
 
-def _run(st: ReaderState, recs: Iterable[Record], subs: _Subroutines, depth: int) -> None:
+def _bulk_gotos(st: ReaderState, run: GotoRun) -> int:
+    """How many leading GOTOs of ``run`` the fast route of :func:`_run` takes, appended at once.
+
+    The same checks as that route, on every row in numpy, and the same numbers (Python's float
+    parses every one): 3 or 6 finite coordinates under 1e7 in sum, a unit axis within 2 %, a
+    3-number GOTO keeping the axis before it. Returns at the first row the route would not take.
+    """
+    joined = ",".join(run.args)
+    if "_" in joined:  # float() would read 1_0 as 10: the one-at-a-time route says what it is
+        return 0
+    try:
+        values = np.array(list(map(float, joined.split(","))))
+    except ValueError:
+        return 0
+    counts = np.fromiter(map(str.count, run.args, itertools.repeat(",")), int, len(run.args)) + 1
+    if np.all(counts == 6):  # the usual runs: one shape throughout
+        xyz, ijk, six = values.reshape(-1, 6)[:, :3], values.reshape(-1, 6)[:, 3:], np.ones(len(counts), bool)
+    elif np.all(counts == 3):
+        xyz, ijk, six = values.reshape(-1, 3), np.full((len(counts), 3), np.nan), np.zeros(len(counts), bool)
+    else:
+        shaped = (counts == 3) | (counts == 6)
+        counts = counts[:len(counts) if shaped.all() else int(np.argmin(shaped))]
+        start = np.cumsum(counts) - counts
+        xyz = values[start[:, None] + np.arange(3)]
+        six = counts == 6
+        ijk = np.where(six[:, None], values[np.minimum(start[:, None] + np.arange(3, 6), len(values) - 1)], np.nan)
+    x, y, z = xyz.T
+    i, j, k = ijk.T
+    good = np.abs(x) + np.abs(y) + np.abs(z) < 1e7  # also false for NaN
+    norm = i * i + j * j + k * k
+    good &= ~six | ((norm > 0.98) & (norm < 1.02))
+    n = len(good) if good.all() else int(np.argmin(good))
+    if n == 0:
+        return 0
+    last = np.maximum.accumulate(np.where(six[:n], np.arange(n), -1))  # the GOTO that set each row's axis
+    axes = ijk[np.maximum(last, 0)]
+    axes[last < 0] = st.axis
+    st.rows.extend(np.column_stack([xyz[:n], axes]))
+    st.lines.extend(run.lines[:n])
+    if last[-1] >= 0:
+        st.axis = tuple(float(a) for a in axes[-1])
+    return n
+
+
+def _run(st: ReaderState, recs: Iterable[Record | GotoRun], subs: _Subroutines, depth: int) -> None:
     add_row, add_line = st.rows.data.extend, st.lines.append  # the fast route's appends, bound once
     fast = st.fast_goto_ok()
-    for rec in recs:
-        if subs.capturing is not None:
-            if rec.word == "ENDSUB":
-                name, _line, body = subs.capturing
-                subs.defined[name] = body
-                subs.capturing = None
-            elif rec.word == "DEFSUB":
-                raise st.fail(f"DEFSUB inside the definition of subroutine {subs.capturing[0]} "
-                              f"(line {subs.capturing[1]})", rec.line)
-            else:
-                subs.capturing[2].append(rec)
-            continue
-        if fast and rec.word == "GOTO" and "_" not in rec.args:  # float() would read 1_0 as 10
-            try:
-                vals = [float(v) for v in rec.args.split(",")]
-            except ValueError:
-                vals = []
-            if len(vals) == 3 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:  # also false for NaN
-                vals += st.axis
-                add_row(vals)
-                add_line(rec.line)
+    for item in recs:
+        if isinstance(item, GotoRun):
+            taken = _bulk_gotos(st, item) if fast and subs.capturing is None else 0
+            if taken == len(item.args):
                 continue
-            if len(vals) == 6 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:
-                i, j, k = vals[3], vals[4], vals[5]
-                if 0.98 < i * i + j * j + k * k < 1.02:
-                    st.axis = (i, j, k)
+            batch: Iterable[Record] = item.records(taken)
+        else:
+            batch = (item,)
+        for rec in batch:
+            if subs.capturing is not None:
+                if rec.word == "ENDSUB":
+                    name, _line, body = subs.capturing
+                    subs.defined[name] = body
+                    subs.capturing = None
+                elif rec.word == "DEFSUB":
+                    raise st.fail(f"DEFSUB inside the definition of subroutine {subs.capturing[0]} "
+                                  f"(line {subs.capturing[1]})", rec.line)
+                else:
+                    subs.capturing[2].append(rec)
+                continue
+            if fast and rec.word == "GOTO" and "_" not in rec.args:  # float() would read 1_0 as 10
+                try:
+                    vals = [float(v) for v in rec.args.split(",")]
+                except ValueError:
+                    vals = []
+                if len(vals) == 3 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:  # also false for NaN
+                    vals += st.axis
                     add_row(vals)
                     add_line(rec.line)
                     continue
-        if rec.word == "DEFSUB":
-            subs.capturing = (subs.name(st, rec), rec.line, [])
-        elif rec.word == "ENDSUB":
-            raise st.fail("ENDSUB without DEFSUB", rec.line)
-        elif rec.word == "CALSUB":
-            name = subs.name(st, rec)
-            if name not in subs.defined:
-                raise st.fail(f"CALSUB/{name[:40]}: no such subroutine defined before it", rec.line)
-            if depth >= MAX_CALL_DEPTH:
-                raise st.fail(f"CALSUB/{name[:40]}: subroutines nested more than {MAX_CALL_DEPTH} deep", rec.line)
-            _run(st, subs.defined[name], subs, depth + 1)
-        else:
-            _dispatch(st, rec)
-        if st.done:
-            break
-        fast = st.fast_goto_ok()
+                if len(vals) == 6 and abs(vals[0]) + abs(vals[1]) + abs(vals[2]) < 1e7:
+                    i, j, k = vals[3], vals[4], vals[5]
+                    if 0.98 < i * i + j * j + k * k < 1.02:
+                        st.axis = (i, j, k)
+                        add_row(vals)
+                        add_line(rec.line)
+                        continue
+            if rec.word == "DEFSUB":
+                subs.capturing = (subs.name(st, rec), rec.line, [])
+            elif rec.word == "ENDSUB":
+                raise st.fail("ENDSUB without DEFSUB", rec.line)
+            elif rec.word == "CALSUB":
+                name = subs.name(st, rec)
+                if name not in subs.defined:
+                    raise st.fail(f"CALSUB/{name[:40]}: no such subroutine defined before it", rec.line)
+                if depth >= MAX_CALL_DEPTH:
+                    raise st.fail(f"CALSUB/{name[:40]}: subroutines nested more than {MAX_CALL_DEPTH} deep",
+                                  rec.line)
+                _run(st, subs.defined[name], subs, depth + 1)
+            else:
+                _dispatch(st, rec)
+            if st.done:
+                return
+            fast = st.fast_goto_ok()
 
 
 def _parse(lines: Iterable[str], st: ReaderState) -> None:
     subs = _Subroutines()
-    _run(st, records(lines), subs, 0)
+    _run(st, record_runs(lines), subs, 0)
     if subs.capturing is not None:
         raise st.fail(f"DEFSUB/{subs.capturing[0][:40]} has no ENDSUB", subs.capturing[1])
     if isinstance(st.curve, curves.PendingSpline):
