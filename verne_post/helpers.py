@@ -6,7 +6,7 @@ A helper is a forked process that runs what it is handed in the order it was han
 pool of one worker), so the verifier keeps where its reading of the program stands from one part
 to the next. Each helper imports what only it needs (scipy, ~0.3 s a module) as it starts, while
 the main process is still reading the CL file. The results are the bits the main process would
-have computed: the same code on the same numbers (tests/test_parts.py).
+have computed: the same code on the same numbers (tests/test_helpers.py).
 """
 
 from __future__ import annotations

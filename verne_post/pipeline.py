@@ -98,11 +98,11 @@ class Figures:
     budget: dict[str, float] = field(default_factory=dict)
     ratios: np.ndarray = field(default_factory=lambda: np.zeros((3, 5)))  # velocity, acceleration, jerk / limit
 
-    def add(self, machine: Machine, poses: MachinePoses, path: PathIK, first: int, blocks: Blocks, rapid: np.ndarray,
-            duration: np.ndarray, schedule: Schedule | None, timing: bool, context: int = 0) -> None:
-        """Add the figures of a part: the path of poses ``first``... and its blocks; the first
-        ``context`` blocks belong to the part before (the motion from there counts);
-        ``timing``: also the planner's figures (time budget, ratios to the limits)."""
+    def add(self, poses: MachinePoses, path: PathIK, first: int, blocks: Blocks, rapid: np.ndarray, timed: Timing,
+            context: int = 0) -> None:
+        """Add the figures of a part: the path of poses ``first``... and its blocks, their timing
+        (with the planner's figures, if gathered); the first ``context`` blocks belong to the part
+        before (the motion from there counts)."""
         own = slice(context, None)
         joints = blocks.joints[own]
         finite = joints[np.all(np.isfinite(joints), axis=1)]
@@ -120,21 +120,17 @@ class Figures:
         step = np.linalg.norm(np.diff(blocks.tip, axis=0), axis=1)
         self.feed_length += float(np.sum(step[~rapid[1:]]))
         self.rapid_length += float(np.sum(step[rapid[1:]]))
-        own_duration, own_rapid = duration[own], rapid[own]
+        own_duration, own_rapid = timed.duration[own], rapid[own]
         self.time += float(np.sum(own_duration))
         self.rapid_time += float(np.sum(own_duration[own_rapid]))
         tools = poses.tool[blocks.pose[own]]
         for tool in np.unique(tools):
             self.time_per_tool[int(tool)] = self.time_per_tool.get(int(tool), 0.0) + float(
                 np.sum(own_duration[tools == tool]))
-        self.planned &= schedule is not None
-        if schedule is not None and timing:
-            limits = Limits.from_machine(machine)
-            self.ratios = np.maximum(self.ratios, limit_ratios(schedule, limits))
-            speed = feed_speed(poses, blocks, duration)
-            budget = time_budget(schedule, blocks.joints, blocks.tip, speed, limits,
-                                 np.radians(machine.timing.rotary_feed) / 60.0)
-            for name, value in budget.items():
+        self.planned &= timed.schedule is not None
+        if timed.ratios is not None and timed.budget is not None:
+            self.ratios = np.maximum(self.ratios, timed.ratios)
+            for name, value in timed.budget.items():
                 self.budget[name] = self.budget.get(name, 0.0) + value
 
 
@@ -205,8 +201,14 @@ class PostResult:
     placement: Placement | None = None  # how the work offset was chosen (work_offset "auto")
 
     def figures(self, machine: Machine, timing: bool = True) -> Figures:
+        """The report's figures; ``timing``: with the planner's (time budget, ratios to the limits)."""
+        timed = Timing(self.duration, self.schedule)
+        if timing and self.schedule is not None:
+            timed = timed.with_figures(self.blocks.joints, self.blocks.tip, feed_speed(self.poses, self.blocks,
+                                                                                        self.duration),
+                                       Limits.from_machine(machine), np.radians(machine.timing.rotary_feed) / 60.0)
         figures = Figures()
-        figures.add(machine, self.poses, self.path, 0, self.blocks, self.rapid, self.duration, self.schedule, timing)
+        figures.add(self.poses, self.path, 0, self.blocks, self.rapid, timed)
         return figures
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
@@ -241,11 +243,16 @@ NO_TIP_LIMIT = 1e9
 def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
     """Programmed tip speed limit (mm/s) of the motion into each block; inverse-time moves give
     their length over their programmed duration."""
-    speed = poses.feed[blocks.pose] / 60.0
-    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
+    return _tip_speed(poses.feed[blocks.pose], poses.inverse_time[blocks.pose], blocks.tip, duration)
+
+
+def _tip_speed(feed: np.ndarray, inverse_time: np.ndarray, tip: np.ndarray, duration: np.ndarray) -> np.ndarray:
+    """:func:`feed_speed` of blocks with programmed ``feed`` (mm/min, or 1/min where
+    ``inverse_time``), tips (mm) and durations (s)."""
+    length = np.linalg.norm(np.diff(tip, axis=0, prepend=tip[:1]), axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse = np.where((duration > 0) & (length > 0), length / duration, NO_TIP_LIMIT)
-    return np.where(poses.inverse_time[blocks.pose], inverse, speed)
+    return np.where(inverse_time, inverse, feed / 60.0)
 
 
 @dataclass(frozen=True)
@@ -312,13 +319,23 @@ PART_POSES = 10_000
 @dataclass(frozen=True)
 class Timing:
     """Stage 6 of a part: the block durations (s), the schedule they come from (None: not
-    planned, the durations then from the programmed feeds), what could not be planned, and the
-    seconds the planning took."""
+    planned, the durations then from the programmed feeds), what could not be planned, the
+    seconds the planning took, and the planner's figures for the report when gathered (ratios
+    to the limits (3, 5), the time budget in s)."""
 
     duration: np.ndarray
     schedule: Schedule | None = None
     violations: tuple[Violation, ...] = ()
     seconds: float = 0.0
+    ratios: np.ndarray | None = None
+    budget: dict[str, float] | None = None
+
+    def with_figures(self, joints: np.ndarray, tip: np.ndarray, speed: np.ndarray, limits: Limits,
+                     rotary_feed: float) -> Timing:
+        """With the planner's figures of the blocks (mm, rad; programmed tip speed mm/s; rad/s)."""
+        assert self.schedule is not None
+        return replace(self, ratios=limit_ratios(self.schedule, limits),
+                       budget=time_budget(self.schedule, joints, tip, speed, limits, rotary_feed))
 
 
 @dataclass(frozen=True)
@@ -329,7 +346,8 @@ class TimingTask:
     joints: np.ndarray
     tip: np.ndarray
     rapid: np.ndarray
-    feed: np.ndarray
+    feed: np.ndarray  # as programmed: mm/min, or 1/min where inverse_time
+    inverse_time: np.ndarray
     group: np.ndarray
     line: np.ndarray
     unplanned: np.ndarray  # s: the durations from the programmed feeds, where planning fails
@@ -338,19 +356,26 @@ class TimingTask:
     corner: float  # rad
     engine: Engine
     workers: int
+    figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
 
 
 def plan_timing(task: TimingTask) -> Timing:
     """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.schedule.plan_program`)."""
     start = time.perf_counter()
     try:
-        schedule = plan_program(task.joints, task.tip, task.rapid, task.feed, task.group, task.limits,
-                                rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
+        schedule = plan_program(task.joints, task.tip, task.rapid,
+                                _tip_speed(task.feed, task.inverse_time, task.tip, task.unplanned), task.group,
+                                task.limits, rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
                                 engine=task.engine)
     except SequenceError as error:
         violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
         return Timing(task.unplanned, None, (violation,), time.perf_counter() - start)
-    return Timing(schedule.duration, schedule, (), time.perf_counter() - start)
+    timed = Timing(schedule.duration, schedule)
+    if task.figures:  # of the planned durations, as the HTML report's
+        timed = timed.with_figures(task.joints, task.tip, _tip_speed(task.feed, task.inverse_time, task.tip,
+                                                                     schedule.duration),
+                                   task.limits, task.rotary_feed)
+    return replace(timed, seconds=time.perf_counter() - start)
 
 
 #: Plans a part's timing: here (:func:`plan_timing`), or in a helper process (a future of it).
@@ -428,10 +453,10 @@ def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: Pa
 
 
 def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: int, lap: Callable[[str], None],
-           plan: bool, planner: Planner = plan_timing) -> Iterator[Part]:
+           plan: bool, planner: Planner = plan_timing, figures: bool = False) -> Iterator[Part]:
     """Stages 3 to 5 of each part in turn (one part when ``size`` covers the program), and the
     timing of each handed to ``planner``; ``plan``: plan the timing of the parts, up to the
-    first with a violation of stages 3 to 5."""
+    first with a violation of stages 3 to 5; ``figures``: with the planner's figures."""
     n = len(poses)
     pairs = None if size >= n else _choose_pairs(machine, poses, size)
     state = BranchState()
@@ -478,10 +503,10 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         planning = None
         if plan:
             planning = planner(TimingTask(
-                blocks.joints, blocks.tip, rapid, feed_speed(poses, blocks, duration), poses.sequence[blocks.pose],
-                poses.line[blocks.pose], duration, Limits.from_machine(machine),
+                blocks.joints, blocks.tip, rapid, poses.feed[blocks.pose], poses.inverse_time[blocks.pose],
+                poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
-                options.planner, options.workers))
+                options.planner, options.workers, figures))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
@@ -676,7 +701,7 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     in_cone = False
     failed = placement is not None and not placement.feasible
     helped = planner is not plan_timing
-    parts = _parts(machine, poses, options, part_poses, clock.lap, options.plan and not failed, planner)
+    parts = _parts(machine, poses, options, part_poses, clock.lap, options.plan and not failed, planner, timing_figures)
     with _spool(output) as spool:
         for k, part in enumerate(_one_ahead(parts) if helped else parts):
             timed = part.timed(wanted=not failed)  # a part after a failed one: as if not planned
@@ -688,8 +713,7 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
                 checks += part.checks
                 others += part.others
             timing += timed.violations
-            figures.add(machine, poses, part.path, part.first, part.blocks, part.rapid, timed.duration,
-                        timed.schedule, timing_figures, part.context)
+            figures.add(poses, part.path, part.first, part.blocks, part.rapid, timed, part.context)
             warnings += part.warnings
             in_cone = in_cone or bool(part.path.in_cone.any())
             if output is not None and not failed:
