@@ -6,7 +6,9 @@ one-process pipeline (``workers=1``), itself checked against posting whole in te
 
 from __future__ import annotations
 
+import os
 import pickle
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -16,6 +18,7 @@ from scipy.interpolate import PPoly
 
 import verne_post as vp
 import verne_post.pipeline as pipeline
+from verne_post.errors import HelperError
 from verne_post.feed_planner import Cubics
 from verne_post.pipeline import PostOptions, post
 from verne_post.schedule import SequenceError
@@ -95,6 +98,31 @@ def test_an_error_in_a_helper_reaches_the_caller(tmp_path: Path, monkeypatch: py
         post(EXAMPLES / "nx_swarf_inch_crlf.cls", vp.load_machine(), PostOptions(workers=2), tmp_path / "x.nc",
              part_poses=50)
     assert not (tmp_path / "x.nc").exists()
+
+
+@pytest.mark.parametrize("which", ["planning", "verification"])
+def test_a_helper_that_dies_is_one_error_and_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                            which: str) -> None:
+    """A helper killed mid-run (the OOM killer, say): a one-line HelperError (exit 1), no file."""
+    parent = os.getpid()
+    real_plan, real_read = pipeline.plan_program, vp.verify.Verifier.read
+
+    def die_in_child(real: Callable[..., object]) -> Callable[..., object]:
+        def dying(*args: object, **kwargs: object) -> object:
+            if os.getpid() != parent:
+                os._exit(9)
+            return real(*args, **kwargs)
+        return dying
+
+    if which == "planning":
+        monkeypatch.setattr(pipeline, "plan_program", die_in_child(real_plan))
+    else:
+        monkeypatch.setattr(vp.verify.Verifier, "read", die_in_child(real_read))
+    target = tmp_path / "x.nc"
+    with pytest.raises(HelperError, match="helper process stopped") as caught:
+        post(EXAMPLES / "nx_swarf_inch_crlf.cls", vp.load_machine(), PostOptions(workers=2), target, part_poses=50)
+    assert caught.value.exit_code == 1 and "\n" not in str(caught.value)
+    assert not target.exists() and not list(tmp_path.iterdir())
 
 
 def test_cubics_evaluate_as_scipy_ppoly() -> None:

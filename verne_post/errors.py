@@ -91,3 +91,10 @@ class CheckError(UserError):
     """The program is well-formed but the machine cannot run it (limits, reach): exit code 3."""
 
     exit_code = 3
+
+
+class HelperError(UserError):
+    """A helper process of the pipeline stopped before its work was done (killed, out of memory):
+    nothing is written; exit code 1, as for an aborted run."""
+
+    exit_code = 1

@@ -17,8 +17,10 @@ import signal
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
+from .errors import HelperError
 from .machine import Machine
 from .verify import Reference, Verification, Verifier
 
@@ -32,6 +34,25 @@ def _start(modules: tuple[str, ...], then: Callable[..., None] | None, args: tup
         importlib.import_module(name)
     if then is not None:
         then(*args)
+
+
+def available(workers: int) -> bool:
+    """Whether to post with helpers: more than one worker, and processes that can be forked."""
+    return workers > 1 and "fork" in multiprocessing.get_all_start_methods()
+
+
+def outcome(future: Future[T]) -> T:
+    """The result of a call handed to a helper (waits for it); raises what the call raised, or
+    :class:`~verne_post.errors.HelperError` when the helper died before it was done."""
+    try:
+        return future.result()
+    except BrokenProcessPool:
+        raise _died() from None
+
+
+def _died() -> HelperError:
+    return HelperError("a helper process stopped before its work was done (killed, or out of memory?); "
+                       "--workers 1 posts in one process")
 
 
 def _started() -> None:
@@ -50,7 +71,10 @@ class Helper:
 
     def submit(self, function: Callable[..., T], *args: Any) -> Future[T]:
         """Run ``function(*args)`` there, after everything handed over before."""
-        return self._pool.submit(function, *args)
+        try:
+            return self._pool.submit(function, *args)
+        except BrokenProcessPool:
+            raise _died() from None
 
     def close(self) -> None:
         """Stop, once what is under way is done: what has not started is dropped (a failed run
@@ -106,8 +130,8 @@ class VerifierProcess:
         self._reads.append(self._helper.submit(_read, text, reference, final))
 
     def result(self) -> Verification:
-        self.seconds = sum(read.result() or 0.0 for read in self._reads)
-        return self._helper.submit(_result).result()
+        self.seconds = sum(outcome(read) or 0.0 for read in self._reads)
+        return outcome(self._helper.submit(_result))
 
     def close(self) -> None:
         self._helper.close()

@@ -42,7 +42,7 @@ from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
 from .errors import OutputError
 from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
-from .helpers import Helper, VerifierProcess
+from .helpers import Helper, VerifierProcess, available, outcome
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
@@ -411,7 +411,7 @@ class Part:
             if isinstance(self.planning, Future):
                 self.planning.cancel()
             return Timing(self.unplanned)
-        return self.planning.result() if isinstance(self.planning, Future) else self.planning
+        return outcome(self.planning) if isinstance(self.planning, Future) else self.planning
 
 
 def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
@@ -650,12 +650,12 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     verify = verify and output is not None
     with contextlib.ExitStack() as helpers:  # started first: they import scipy while the CL file is read
         planner: Planner = plan_timing
-        if options.workers > 1 and options.plan:
+        if available(options.workers) and options.plan:
             planning = Helper(("scipy.linalg",))
             helpers.callback(planning.close)
             planner = partial(_plan_in, planning)
         verifying = None
-        if options.workers > 1 and verify:
+        if available(options.workers) and verify:
             verifying = VerifierProcess(machine)
             helpers.callback(verifying.close)
         clock = _Clock(progress)
