@@ -227,8 +227,10 @@ class RapidPlan:
     def __reduce__(self) -> tuple:
         # ruckig's Trajectory cannot be pickled: a plan sent between processes is planned
         # again from its ends and limits on arrival (ruckig is deterministic: the same plan).
-        if self.trajectory is None or self.limits is None:
+        if self.trajectory is None:
             return RapidPlan, (self.start, self.end, self.duration, None, self.limits)
+        if self.limits is None:
+            raise TypeError("a RapidPlan with a trajectory crosses processes with the limits it was planned with")
         return plan_rapid, (self.start, self.end, self.limits)
 
     def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
