@@ -118,19 +118,22 @@ class VerifierProcess:
 
     def __init__(self, machine: Machine) -> None:
         self._helper = Helper(("scipy.spatial",), _keep, (machine,))
+        self._started: Future[None] | None = None
         self._reads: list[Future[float]] = []
         self.seconds = 0.0  # spent verifying, once :meth:`result` has been called
 
     def start(self, **settings: Any) -> VerifierProcess:
         """The settings of :class:`~verne_post.verify.Verifier` (source, tolerances, work offset)."""
-        self._reads.append(self._helper.submit(_new_verifier, settings))
+        self._started = self._helper.submit(_new_verifier, settings)
         return self
 
     def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
         self._reads.append(self._helper.submit(_read, text, reference, final))
 
     def result(self) -> Verification:
-        self.seconds = sum(outcome(read) or 0.0 for read in self._reads)
+        assert self._started is not None, "start() gives the settings first"
+        outcome(self._started)
+        self.seconds = sum(outcome(read) for read in self._reads)
         return outcome(self._helper.submit(_result))
 
     def close(self) -> None:

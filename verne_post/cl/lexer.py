@@ -128,6 +128,7 @@ def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
                 yield GotoRun(run_args, run_lines)
                 run_args, run_lines = [], []
             continue
+        record = None
         if pending is None:
             s = raw.strip()
             if not s:
@@ -137,34 +138,31 @@ def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
                 continue
             text = _TEXT_HEAD_RE.match(s)
             if text is not None:
-                seen_record = True
-                if run_args:
-                    yield GotoRun(run_args, run_lines)
-                    run_args, run_lines = [], []
-                yield Record(text.group(1).upper(), s[text.end():].strip(), lineno)
+                record = Record(text.group(1).upper(), s[text.end():].strip(), lineno)
+            elif _TRAILER_RE.match(s) or (not seen_record and _HEADER_RE.match(s)):
                 continue
-            if _TRAILER_RE.match(s) or (not seen_record and _HEADER_RE.match(s)):
+        if record is None:
+            cut = raw.find("$$")
+            body = (raw if cut < 0 else raw[:cut]).rstrip()
+            if body.endswith("$"):
+                if pending is None:
+                    pending, pending_line = [], lineno
+                pending.append(body[:-1])
                 continue
-        cut = raw.find("$$")
-        body = (raw if cut < 0 else raw[:cut]).rstrip()
-        if body.endswith("$"):
-            if pending is None:
-                pending, pending_line = [], lineno
-            pending.append(body[:-1])
-            continue
-        line = lineno
-        if pending is not None:
-            if not body.strip():
-                continue  # blank or comment-only line inside a continued record
-            pending.append(body)
-            body, line, pending = "".join(pending), pending_line, None
-        record = _make(body, line)
-        if record is not None:
-            seen_record = True
-            if run_args:
-                yield GotoRun(run_args, run_lines)
-                run_args, run_lines = [], []
-            yield record
+            line = lineno
+            if pending is not None:
+                if not body.strip():
+                    continue  # blank or comment-only line inside a continued record
+                pending.append(body)
+                body, line, pending = "".join(pending), pending_line, None
+            record = _make(body, line)
+            if record is None:
+                continue
+        seen_record = True
+        if run_args:  # the GOTOs before this record first
+            yield GotoRun(run_args, run_lines)
+            run_args, run_lines = [], []
+        yield record
     if run_args:
         yield GotoRun(run_args, run_lines)
     if pending is not None:

@@ -203,7 +203,8 @@ def _bulk_gotos(st: ReaderState, run: GotoRun) -> int:
         return 0
     counts = np.fromiter(map(str.count, run.args, itertools.repeat(",")), int, len(run.args)) + 1
     if np.all(counts == 6):  # the usual runs: one shape throughout
-        xyz, ijk, six = values.reshape(-1, 6)[:, :3], values.reshape(-1, 6)[:, 3:], np.ones(len(counts), bool)
+        rows = values.reshape(-1, 6)
+        xyz, ijk, six = rows[:, :3], rows[:, 3:], np.ones(len(counts), bool)
     elif np.all(counts == 3):
         xyz, ijk, six = values.reshape(-1, 3), np.full((len(counts), 3), np.nan), np.zeros(len(counts), bool)
     else:
