@@ -20,6 +20,7 @@ time, in whichever process it ran), and the report's stage timings.
 from __future__ import annotations
 
 import argparse
+import compileall
 import importlib.util
 import json
 import re
@@ -63,6 +64,9 @@ def main() -> None:
     if rs274 is None:
         raise SystemExit(INSTALL_HINT)
     post = [sys.executable, "-m", "verne_post"]  # the verne-post command of this interpreter
+    # Byte-compiled, as `pip install` leaves an installed package: an editable install under
+    # PYTHONDONTWRITEBYTECODE (set on some CI machines) would compile every module on each run.
+    compileall.compile_dir(ROOT / "verne_post", quiet=1)
     env = _environment(rs274)
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)

@@ -94,6 +94,24 @@ def test_module_round_trip(machine: vp.Machine) -> None:
     assert np.abs(rod_residuals(geom, platform, alpha, rho)).max() <= 1e-9 * geom.L1**2
 
 
+def test_warm_started_fk_agrees_with_all_solutions(machine: vp.Machine) -> None:
+    """With a guess of alpha (as along a path: the neighbours' alpha, or a poor one), the working
+    FK lands on the all-solutions route's working assembly; each pose stops iterating on its own."""
+    geom = machine.kinematic_geometry(30.0)
+    joints = random_usable_joints(machine, 4_000, 11, 30.0)
+    everything = module_fk_all(geom, joints[:, :3])
+    working = everything.working_mode
+    assert np.array_equal(np.bincount(everything.pose_index[working], minlength=len(joints)), np.ones(len(joints)))
+    order = np.argsort(everything.pose_index[working])
+    alpha, platform = everything.alpha[working][order], everything.platform[working][order]
+    rng = np.random.default_rng(12)
+    for spread in (1e-9, 1e-4, 1e-2, 0.1):  # rad, off the true alpha
+        fast = module_fk_working(geom, joints[:, :3], alpha_guess=alpha + rng.normal(0.0, spread, len(alpha)))
+        assert fast.reachable.all()
+        np.testing.assert_allclose(fast.platform, platform, atol=1e-8)
+        np.testing.assert_allclose(fast.alpha, alpha, atol=1e-11)
+
+
 def test_fast_paths_agree_with_all_solutions(machine: vp.Machine) -> None:
     geom = machine.kinematic_geometry(30.0)
     joints = random_usable_joints(machine, 2_000, 6, 30.0)

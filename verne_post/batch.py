@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 
 from . import __version__
+from .allocator import keep_freed_memory
 from .atomic import atomic_write, check_writable
 from .errors import InputError, OutputError, UserError, one_line
 from .gcode import PREAMBLE, with_header_line
@@ -486,7 +487,9 @@ def local_executor(jobs: int | None = None) -> ProcessPoolExecutor:
     context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
     if "forkserver" in methods:
         context.set_forkserver_preload(["verne_post.batch", "verne_post.pipeline"])
-    return ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1, mp_context=context)
+    # The workers are verne-post's own processes: they keep freed memory as the command does.
+    return ProcessPoolExecutor(max_workers=jobs or os.cpu_count() or 1, mp_context=context,
+                               initializer=keep_freed_memory)
 
 
 @contextlib.contextmanager

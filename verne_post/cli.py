@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 import click
 import numpy as np
 
+from .allocator import keep_freed_memory
 from .api import (
     JOINT_NAMES,
     Status,
@@ -58,6 +59,7 @@ class _DefaultToPost(click.Group):
         Python warnings (e.g. numpy's on NaN arithmetic in rejected input) are not shown: every
         line on stderr is one of verne-post's own messages.
         """
+        keep_freed_memory()
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

@@ -678,12 +678,14 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     order = np.lexsort((block, pose))
     pose, block = pose[order], block[order]
     bounds = np.flatnonzero(np.r_[True, pose[1:] != pose[:-1], True])
-    poses, blocks = pose[bounds[:-1]].tolist(), block.tolist()
-    previous = -1
-    for p, lo, hi in zip(poses, bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
-        k = bisect.bisect_left(blocks, previous, lo, hi)
-        previous = blocks[k] if k < hi else blocks[hi - 1]
-        matched[p] = previous
+    lo, hi = bounds[:-1], bounds[1:]
+    taken = block[lo]  # a pose with one candidate takes it whatever the pose before took
+    blocks = block.tolist()
+    for i in np.flatnonzero(hi - lo > 1).tolist():  # in order: each after the pose before it
+        start, stop = int(lo[i]), int(hi[i])
+        k = bisect.bisect_left(blocks, int(taken[i - 1]) if i else -1, start, stop)
+        taken[i] = blocks[k] if k < stop else blocks[stop - 1]
+    matched[pose[lo]] = taken
     return matched
 
 

@@ -459,14 +459,16 @@ def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray |
     a1 = a0 + (1e-4 if warm else 0.02)
     _, f0 = _working_branch(geom, rho, a0)
     platform, f1 = _working_branch(geom, rho, a1)
+    active = np.arange(rho.shape[0])  # the poses still iterating: most need 2-3 steps, a few more
     for _ in range(12):
-        slope = f1 - f0
-        step = np.clip(np.nan_to_num(np.divide(f1 * (a1 - a0), slope, out=np.zeros_like(f1), where=slope != 0)),
-                       -0.3, 0.3)
-        a0, f0 = a1, f1
-        a1 = a1 - step
-        platform, f1 = _working_branch(geom, rho, a1)
-        if np.max(np.abs(step), initial=0.0) < 1e-15:
+        slope = f1[active] - f0[active]
+        step = np.clip(np.nan_to_num(np.divide(f1[active] * (a1[active] - a0[active]), slope,
+                                               out=np.zeros_like(slope), where=slope != 0)), -0.3, 0.3)
+        a0[active], f0[active] = a1[active], f1[active]
+        a1[active] -= step
+        platform[active], f1[active] = _working_branch(geom, rho[active], a1[active])
+        active = active[np.abs(step) >= 1e-15]
+        if not active.size:
             break
     alpha = np.angle(np.exp(1j * a1))
     good = np.all(np.isfinite(platform), axis=-1)
