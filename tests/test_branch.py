@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import verne_post as vp
-from tests.conftest import random_usable_joints
-from verne_post.branch import PairAngles, PairChooser, both_pairs, choose_pairs, in_pole_cone, solve_path
+from verne_post.branch import solve_path
 from verne_post.machine import JointLimits
 
 
@@ -75,45 +74,3 @@ def test_rapids_take_the_short_way_round(machine: vp.Machine) -> None:
     tip, axis = _cone_path(2, 30.0, 0.9)  # two poses 324 degrees apart in azimuth
     path = solve_path(machine, tip, axis, np.array([0, 1]), tool_length=60.0)
     assert abs(np.degrees(np.diff(path.result.joints[:, 4]))[0]) <= 180
-
-
-def test_pairs_chosen_a_stretch_at_a_time_are_those_chosen_whole(machine: vp.Machine) -> None:
-    """PairChooser, asked part by part (parts of random lengths, each end sometimes asked for
-    twice as the pipeline does when it looks for a cut), against choose_pairs on the whole path:
-    the same pairs, switches, lead and chosen pair's IK. The path starts with poses on the pole
-    (their lead comes from a later chunk), and has runs of every length, some on the pole."""
-    rng = np.random.default_rng(5)
-    n = 6_000
-    # joint-space lines between random usable joints, 200 poses each: smooth runs, on which
-    # both pairs travel alike and the way from the run before decides
-    ends = random_usable_joints(machine, n // 200 + 1, 9)
-    f = np.linspace(0.0, 1.0, 200, endpoint=False)[None, :, None]
-    joints = (ends[:-1, None] + f * np.diff(ends, axis=0)[:, None]).reshape(-1, 5)
-    fk = vp.forward_kinematics(machine, joints)
-    tip, axis = fk.tip, fk.axis.copy()
-    on_pole = rng.random(n) < 0.05
-    on_pole[:700] = True
-    axis[on_pole] = (0.0, 0.0, 1.0)
-    sequence = np.cumsum(rng.random(n) < 0.01)
-    lengths = np.zeros(n)
-    in_cone = in_pole_cone(axis, np.radians(machine.pole.cone))
-    plus, minus = both_pairs(machine, tip, axis, lengths)
-    whole = choose_pairs(PairAngles.of(plus), PairAngles.of(minus), sequence, in_cone)
-    assert whole.lead is not None and whole.switch.any() and not whole.plus.all()
-    for chunk in (64, 500, 2_000):
-        chooser = PairChooser(lambda a, b: both_pairs(machine, tip[a:b], axis[a:b], lengths[a:b]), sequence, in_cone,
-                              chunk)
-        first = 0
-        while first < n:
-            end = min(n, first + int(rng.integers(1, 900)))
-            if rng.random() < 0.3:
-                chooser.part(first, max(first + 1, (first + end) // 2))
-            part = chooser.part(first, end)
-            rows = slice(first, end)
-            assert np.array_equal(part.plus, whole.plus[rows]) and np.array_equal(part.switch, whole.switch[rows])
-            assert part.lead == whole.lead
-            assert part.chosen is not None
-            expected = plus.take(whole.plus, minus).rows(np.arange(first, end))
-            np.testing.assert_array_equal(part.chosen.joints, expected.joints)
-            np.testing.assert_array_equal(part.chosen.status, expected.status)
-            first = end

@@ -46,7 +46,9 @@ class Pairs:
     plus: np.ndarray  # (N,) bool: pair +1
     switch: np.ndarray  # (N,) bool: the pair changed into this pose inside a sequence off the pole
     lead: float | None  # theta2 (rad, as solved) of the first pose off the pole with a solution
-    chosen: IKResult | None = None  # the chosen pair's IK without margins, where already solved
+
+    def part(self, first: int, end: int) -> Pairs:
+        return Pairs(self.plus[first:end], self.switch[first:end], self.lead)
 
 
 @dataclass(frozen=True)
@@ -153,9 +155,6 @@ class PairAngles:
     def of(cls, result: IKResult) -> PairAngles:
         return cls(result.status, result.joints[:, 3:])
 
-    def rows(self, index: slice) -> PairAngles:
-        return PairAngles(self.status[index], self.angles[index])
-
 
 def _travel(result: PairAngles, rows: np.ndarray, previous: np.ndarray | None) -> tuple[float, float]:
     """Rotary travel (rad) along the rows, from the previous pose's (theta1, theta2) if given,
@@ -200,97 +199,15 @@ def choose_pairs(plus: PairAngles, minus: PairAngles, sequence: np.ndarray, in_c
     """The angle pair along a whole path, run by run (:func:`_run_choice`), from both pairs'
     solutions, the sequence ids and the pole cone mask."""
     use_plus = np.ones(len(sequence), bool)
-    _decide(_runs(sequence, in_cone), plus, minus, use_plus, None)
-    return Pairs(use_plus, _switches(use_plus, sequence, in_cone), _lead(use_plus, plus, minus, in_cone))
-
-
-def _decide(runs: list[tuple[np.ndarray, bool]], plus: PairAngles, minus: PairAngles, use_plus: np.ndarray,
-            previous: np.ndarray | None) -> np.ndarray | None:
-    """Each run's pair into ``use_plus``, in order, each from the one before; returns the last
-    run's last (theta1, theta2) (rad), ``previous`` if there is none."""
-    for rows, fresh in runs:
+    previous: np.ndarray | None = None
+    for rows, fresh in _runs(sequence, in_cone):
         use_plus[rows] = _run_choice(plus, minus, rows, previous, fresh)
         previous = (plus if use_plus[rows[-1]] else minus).angles[rows[-1]]
-    return previous
-
-
-def _switches(use_plus: np.ndarray, sequence: np.ndarray, in_cone: np.ndarray) -> np.ndarray:
-    """Where the pair changes into a pose inside a sequence, both poses off the pole."""
-    return np.r_[False, (use_plus[1:] != use_plus[:-1]) & (sequence[1:] == sequence[:-1])
-                 & ~in_cone[1:] & ~in_cone[:-1]]
-
-
-def _lead(use_plus: np.ndarray, plus: PairAngles, minus: PairAngles, in_cone: np.ndarray) -> float | None:
-    """theta2 (rad, as solved) of the first pose off the pole with a solution, if any."""
+    switch = np.r_[False, (use_plus[1:] != use_plus[:-1]) & (sequence[1:] == sequence[:-1])
+                   & ~in_cone[1:] & ~in_cone[:-1]]
     theta2 = np.where(use_plus, plus.angles[:, 1], minus.angles[:, 1])
     defined = np.flatnonzero(~in_cone & np.isfinite(theta2))
-    return float(theta2[defined[0]]) if defined.size else None
-
-
-class PairChooser:
-    """:func:`choose_pairs` along a long path, a stretch at a time, with the same choices.
-
-    The choice is causal: a run's pair depends on the runs before it and on its own poses. So
-    a run is decided as soon as both pairs' IK is known to its end, ``solve_both(a, b)`` giving
-    that of poses a..b - 1 a chunk at a time; ``lead`` once the first run with a defined theta2
-    is. :meth:`part` hands out the choice for consecutive stretches of poses with their chosen
-    pair's IK (so a part's solve does not solve it again), and forgets the IK before them: what
-    is kept is the IK from the part asked for last to the end of the runs it touches."""
-
-    def __init__(self, solve_both: Callable[[int, int], tuple[IKResult, IKResult]], sequence: np.ndarray,
-                 in_cone: np.ndarray, chunk: int) -> None:
-        self._solve_both, self._sequence, self._in_cone, self._chunk = solve_both, sequence, in_cone, chunk
-        self._runs = _runs(sequence, in_cone)
-        self._next_run = 0  # the first run not decided
-        self._previous: np.ndarray | None = None  # the last decided run's last (theta1, theta2)
-        self._use_plus = np.ones(len(sequence), bool)
-        self._start = 0  # the first pose of the IK kept
-        self._plus: list[IKResult] = []  # the IK kept, chunk after chunk, of pair +1
-        self._minus: list[IKResult] = []  # and of pair -1
-        self._extent = 0  # poses solved so far
-        self.lead: float | None = None
-
-    def _decided(self) -> int:
-        """Poses whose pair is decided (those in the pole cone before the next run included)."""
-        return len(self._sequence) if self._next_run == len(self._runs) else int(self._runs[self._next_run][0][0])
-
-    def _solve_next(self) -> None:
-        a = self._extent
-        self._extent = b = min(len(self._sequence), a + self._chunk)
-        plus, minus = self._solve_both(a, b)
-        self._plus.append(plus)
-        self._minus.append(minus)
-        done = self._next_run
-        while done < len(self._runs) and self._runs[done][0][-1] < b:
-            done += 1
-        if done == self._next_run:
-            return
-        before, base = self._decided(), self._start
-        angles = [PairAngles.of(concatenate(kept)) for kept in (self._plus, self._minus)]
-        runs = [(rows - base, fresh) for rows, fresh in self._runs[self._next_run:done]]
-        use_plus = self._use_plus[base:b]  # a view: decided in place
-        self._previous = _decide(runs, *angles, use_plus, self._previous)
-        self._next_run = done
-        if self.lead is None:
-            rows = slice(before - base, self._decided() - base)
-            self.lead = _lead(use_plus[rows], angles[0].rows(rows), angles[1].rows(rows),
-                              self._in_cone[base:b][rows])
-
-    def part(self, first: int, end: int) -> Pairs:
-        """The choice for poses ``first`` .. ``end`` - 1 with the chosen pair's IK; ``first`` at or
-        after the ``first`` asked for before (the IK before it is forgotten)."""
-        n = len(self._sequence)
-        while self._decided() < end or (self.lead is None and self._extent < n):
-            self._solve_next()
-        while len(self._plus[0].status) <= first - self._start:
-            self._start += len(self._plus[0].status)
-            del self._plus[0], self._minus[0]
-        rows = np.arange(first - self._start, end - self._start)
-        use = self._use_plus[first:end].copy()
-        plus, minus = (concatenate(kept).rows(rows) for kept in (self._plus, self._minus))
-        above = max(first - 1, 0)  # the pose before, for a switch into the first
-        switch = _switches(self._use_plus[above:end], self._sequence[above:end], self._in_cone[above:end])
-        return Pairs(use, switch[first - above:], self.lead, plus.take(use, minus))
+    return Pairs(use_plus, switch, float(theta2[defined[0]]) if defined.size else None)
 
 
 def in_pole_cone(axis: np.ndarray, cone: float) -> np.ndarray:
@@ -347,7 +264,7 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
     whole path (shortest way across rapids) and fitted into a limited rotary's range.
 
     A long path may be solved a part at a time: ``pairs`` the angle pairs chosen along the
-    whole path (:class:`PairChooser`, here the part's), ``state`` the :meth:`PathIK.state_at`
+    whole path (:func:`choose_pairs`, here the part's), ``state`` the :meth:`PathIK.state_at`
     the last pose of the part before. A part must not end within a sequence before a pose
     in the pole cone (its theta2 is interpolated to the next pose off the pole), nor within a
     sequence of a limited rotary (fitted into the range whole).
@@ -362,8 +279,6 @@ def solve_path(machine: Machine, tip: np.ndarray, axis: np.ndarray, sequence: np
         plus, minus = both_pairs(machine, tip, axis, lengths)
         pairs = choose_pairs(PairAngles.of(plus), PairAngles.of(minus), sequence, in_cone)
         chosen = plus.take(pairs.plus, minus)
-    elif pairs.chosen is not None:  # solved as the pairs were chosen (PairChooser)
-        chosen = pairs.chosen
     else:  # only the chosen pair's IK (elementwise: the same numbers as taking them from both)
         chosen = _pair_results(machine, tip, axis, lengths, np.where(pairs.plus, 1, -1), np.zeros(n),
                                with_margins=False)

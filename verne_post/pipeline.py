@@ -35,9 +35,9 @@ from typing import IO, TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from . import __version__
-from .api import JOINT_NAMES, IKResult, joint_bounds
+from .api import JOINT_NAMES, joint_bounds
 from .atomic import atomic_write
-from .branch import BranchState, PairChooser, Pairs, PathIK, both_pairs, in_pole_cone, solve_path
+from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone, solve_path
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
 from .errors import OutputError
@@ -414,15 +414,17 @@ class Part:
         return outcome(self.planning) if isinstance(self.planning, Future) else self.planning
 
 
-def _pair_chooser(machine: Machine, poses: MachinePoses, size: int) -> PairChooser:
-    """The angle pairs along the whole program, chosen ``size`` poses at a time as the parts are
-    solved (the choice weighs whole runs: a part asks for its pairs only up to where its runs end)."""
-
-    def solve_both(first: int, end: int) -> tuple[IKResult, IKResult]:
-        part = poses.part(first, end)
-        return both_pairs(machine, part.tip, part.axis, part.tool_length)
-
-    return PairChooser(solve_both, poses.sequence, in_pole_cone(poses.axis, np.radians(machine.pole.cone)), size)
+def _choose_pairs(machine: Machine, poses: MachinePoses, size: int) -> Pairs:
+    """The angle pairs along the whole program, from both pairs' IK solved ``size`` poses at a
+    time (the choice weighs whole runs: it is made before the parts are solved)."""
+    n = len(poses)
+    plus, minus = (PairAngles(np.empty(n, np.int8), np.empty((n, 2))) for _ in range(2))
+    for first in range(0, n, size):
+        part = poses.part(first, first + size)
+        for out, result in zip((plus, minus), both_pairs(machine, part.tip, part.axis, part.tool_length),
+                               strict=True):
+            out.status[first:first + size], out.angles[first:first + size] = result.status, result.joints[:, 3:]
+    return choose_pairs(plus, minus, poses.sequence, in_pole_cone(poses.axis, np.radians(machine.pole.cone)))
 
 
 def _cut(machine: Machine, poses: MachinePoses, first: int, end: int, solved: PathIK, ext: Blocks,
@@ -456,7 +458,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
     timing of each handed to ``planner``; ``plan``: plan the timing of the parts, up to the
     first with a violation of stages 3 to 5; ``figures``: with the planner's figures."""
     n = len(poses)
-    pairs = None if size >= n else _pair_chooser(machine, poses, size)
+    pairs = None if size >= n else _choose_pairs(machine, poses, size)
     state = BranchState()
     last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
     before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
