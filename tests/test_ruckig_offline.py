@@ -46,7 +46,8 @@ def test_rapids_give_ruckig_no_waypoints_and_python_opens_no_socket(tmp_path: Pa
     monkeypatch.setattr(verne_post.timing, "Ruckig", Spy)
     for name in ("socket", "create_connection", "getaddrinfo"):
         monkeypatch.setattr(socket, name, _no_network)
-    result = CliRunner().invoke(main, [str(PART), "-o", str(tmp_path / "part.nc"), "--quiet"])
+    # in one process: the spy sees every rapid planned (helper processes are traced below)
+    result = CliRunner().invoke(main, [str(PART), "-o", str(tmp_path / "part.nc"), "--quiet", "--workers", "1"])
     assert result.exit_code == 0, result.output
     assert inputs  # the rapids went through the spy: a moved seam fails here, not silently
     assert all(list(inp.intermediate_positions) == [] for inp in inputs)
