@@ -430,3 +430,39 @@ def test_tool_length_from_the_command_line_is_in_the_program(tmp_path: Path) -> 
     result = CliRunner().invoke(main, [str(source), "-o", str(target), "--tool-length", "50", "--quiet"])
     assert result.exit_code == 0, result.output
     assert "(TOOL 0 LENGTH 50.0000 DELTA 545.8000)" in target.read_text().splitlines()
+
+
+def test_cl_points_take_the_earliest_block_at_or_after_the_one_before() -> None:
+    """_match against a brute-force reading of its rule on paths that pass points many times (more
+    than the k-d tree's first candidates), with blocks missing and out of order: every CL pose takes
+    the earliest block end within tolerance at or after the block the pose before took, else the
+    last such block; -1 where none is within tolerance."""
+    from types import SimpleNamespace
+
+    from verne_post.verify import _angle, _match
+
+    rng = np.random.default_rng(21)
+    tol, axis_tol = 0.005, np.radians(0.05)
+    for _ in range(20):
+        spots = rng.uniform(-50, 50, (12, 3))
+        normals = rng.normal(size=(12, 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        visits = rng.integers(0, 12, 300)  # a CL path over 12 spots, each passed ~25 times
+        cl_tip = spots[visits] + rng.normal(0, tol / 4, (300, 3))
+        cl_axis = normals[visits]
+        order = np.arange(300)
+        swap = rng.integers(0, 299, 15)  # some blocks out of order, some CL points never reached
+        order[swap], order[swap + 1] = order[swap + 1], order[swap]
+        order = order[rng.random(300) > 0.05]
+        ends = SimpleNamespace(tip=spots[visits[order]] + rng.normal(0, tol / 4, (len(order), 3)),
+                               axis=normals[visits[order]], reachable=rng.random(len(order)) > 0.02)
+        known = rng.random(len(order)) > 0.02
+        matched = _match(SimpleNamespace(tip=cl_tip, axis=cl_axis), ends, known, tol, axis_tol)
+        previous, expected = -1, np.full(300, -1)
+        for p in range(300):
+            near = np.flatnonzero(known & ends.reachable & (np.linalg.norm(ends.tip - cl_tip[p], axis=1) <= tol)
+                                  & (_angle(ends.axis, cl_axis[p]) <= axis_tol))
+            if near.size:
+                later = near[near >= previous]
+                previous = expected[p] = later[0] if later.size else near[-1]
+        np.testing.assert_array_equal(matched, expected)
