@@ -29,7 +29,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 import verne_post as vp  # noqa: E402
-from verne_post.batch import local_executor  # noqa: E402
+from verne_post.batch import dask_client, local_executor  # noqa: E402
 
 from .pipeline import _generator  # noqa: E402
 
@@ -43,11 +43,8 @@ def _warm(_: int) -> None:
 
 @contextlib.contextmanager
 def _dask(workers: int) -> Iterator[Executor]:
-    from distributed import Client, LocalCluster
-
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                      host="127.0.0.1") as cluster, Client(cluster) as client, \
-            client.get_executor(pure=False) as executor:
+    """The local Dask cluster ``verne-post batch --scheduler dask`` starts, and its executor."""
+    with dask_client("dask", workers) as client, client.get_executor(pure=False) as executor:
         yield executor
 
 

@@ -503,8 +503,10 @@ def dask_client(scheduler: str, jobs: int | None = None) -> Iterator[Any]:
         raise InputError("--scheduler needs Dask: pip install 'verne-post[dask]'") from None
     with contextlib.ExitStack() as stack:
         if scheduler == "dask":
+            # preload: the workers keep freed memory, as the local processes do (twice as fast)
             cluster = stack.enter_context(LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
-                                                       processes=True, dashboard_address=None))
+                                                       processes=True, dashboard_address=None,
+                                                       preload=["verne_post.allocator"]))
             client = stack.enter_context(Client(cluster))
         else:
             try:
