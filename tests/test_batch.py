@@ -310,6 +310,20 @@ def test_without_dask_the_scheduler_option_says_how_to_install_it(tmp_path: Path
 # ----------------------------------------------------------------------------- Dask
 
 
+def test_the_local_dask_cluster_of_the_command_keeps_freed_memory() -> None:
+    """``--scheduler dask`` starts its workers with verne_post.allocator preloaded: malloc keeps
+    freed memory there as in the local processes (a worker's task thread gave it back at once:
+    twice the time per file)."""
+    import platform
+
+    from verne_post.batch import dask_client
+
+    glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
+    with dask_client("dask", 1) as client:
+        kept = client.run(lambda: importlib.import_module("verne_post.allocator").kept)
+    assert list(kept.values()) == [glibc]
+
+
 @pytest.fixture(scope="module")
 def cluster() -> Any:
     distributed = pytest.importorskip("distributed")  # in the test extra: present wherever the tests run
@@ -335,20 +349,6 @@ def test_dask_local_cluster_outputs_are_byte_identical(local_run: Any, cluster: 
                 r.hash)
 
     assert [same(r) for r in results] == [same(r) for r in local_results]
-
-
-def test_the_local_dask_cluster_of_the_command_keeps_freed_memory() -> None:
-    """``--scheduler dask`` starts its workers with verne_post.allocator preloaded: malloc keeps
-    freed memory there as in the local processes (a worker's task thread gave it back at once:
-    twice the time per file)."""
-    import platform
-
-    from verne_post.batch import dask_client
-
-    glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
-    with dask_client("dask", 1) as client:
-        kept = client.run(lambda: importlib.import_module("verne_post.allocator").kept)
-    assert list(kept.values()) == [glibc]
 
 
 def test_dask_scheduler_address_from_the_command_line(cluster: Any, tmp_path: Path) -> None:
