@@ -1,6 +1,6 @@
 """Time-parametrisation on the generated 5-axis job: speed of planning and quality of the plan.
 
-    python -m benchmarks.timing [--points 100000] [--short 10000]
+    python -m benchmarks.timing [--points 100000] [--short 10000] [--topp3 40]
 
 For each job prints, in one run, per TOPP2 engine (copp-py, the default, and toppra, the
 reference) in one process and in as many as there are cores: planning time (blocks/s), the
@@ -10,7 +10,9 @@ joint velocity clamping and no jerk limit (how common CNC controllers plan), the
 jerk-limited look-ahead baseline with per-block S-curves (benchmarks/scurve.py, how controllers
 with S-curve planning run G-code; the issue's target is T below it), and T / LB, T / baseline,
 T / S-curve baseline; and the same plan without jerk limits (T0, the trapezoid's own
-assumptions). Rapids are the same ruckig moves in all of them and are left out.
+assumptions). Rapids are the same ruckig moves in all of them and are left out. Then, on a
+random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what an exact
+third-order method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same sample.
 """
 
 from __future__ import annotations
@@ -30,12 +32,14 @@ import numpy as np  # noqa: E402
 import verne_post as vp  # noqa: E402
 from benchmarks.pipeline import _generator  # noqa: E402
 from benchmarks.scurve import scurve_baseline_time  # noqa: E402
+from benchmarks.topp3 import topp3_reference  # noqa: E402
+from verne_post.linearise import Blocks  # noqa: E402
 from verne_post.pipeline import PostOptions, feed_speed, postprocess  # noqa: E402
-from verne_post.schedule import Schedule, plan_program  # noqa: E402
+from verne_post.schedule import Schedule, Segment, plan_program  # noqa: E402
 from verne_post.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
 
-def measure(points: int, engines: tuple[str, ...]) -> None:
+def measure(points: int, engines: tuple[str, ...], sample: int) -> None:
     machine = vp.load_machine()
     with tempfile.TemporaryDirectory() as folder:
         source = Path(folder) / "job.cls"
@@ -63,7 +67,8 @@ def measure(points: int, engines: tuple[str, ...]) -> None:
         bound += lower_bound_time(*args, angular_feed=rotary)
         baseline += baseline_time(*args, angular_feed=rotary)
         scurve += scurve_baseline_time(*args, angular_feed=rotary)
-    without_jerk = sum(s.plan.total for s in plan(engines[0], 1, jerk=False)[0].segments if not s.rapid)
+    plain = [s for s in plan(engines[0], 1, jerk=False)[0].segments if not s.rapid]
+    without_jerk = sum(s.plan.total for s in plain)
     count = len(blocks.joints)
     print(f"\njob of {len(result.poses):,} CL points, {count:,} blocks, {len(feed)} feed sequences")
     print(f"  lower bound LB                {bound:8.1f} s  (no acceleration limit)")
@@ -79,6 +84,29 @@ def measure(points: int, engines: tuple[str, ...]) -> None:
             print(f"  {engine:8} {workers:9d} {seconds:10.2f} {count / seconds:9,.0f} {total:8.1f} "
                   f"{total / without_jerk:6.3f} {total / bound:6.3f} {total / baseline:6.3f} {total / scurve:9.3f}")
     print("  targets: planning >= 50,000 blocks/s on 2 cores; T / T0 <= 1.02; T / LB <= 1.07; T / S-curve < 1")
+    if sample:
+        _third_order_reference(blocks, speed, limits, feed, plain, sample)
+
+
+def _third_order_reference(blocks: Blocks, speed: np.ndarray, limits: Limits, feed: list[Segment],
+                           plain: list[Segment], sample: int) -> None:
+    """copp-py's TOPP3-LP (benchmarks/topp3.py) on a random sample of the feed sequences, beside
+    the plan's own T / T0 on the same sequences."""
+    rng = np.random.default_rng(0)
+    ours = ours0 = t2 = t3 = 0.0
+    taken = 0
+    clock = time.perf_counter()
+    for k in sorted(rng.choice(len(feed), size=min(sample, len(feed)), replace=False)):
+        segment = feed[k]
+        rows = np.arange(segment.first - 1, segment.last + 1)
+        times = topp3_reference(blocks.joints[rows], blocks.tip[rows], speed[segment.first:segment.last + 1], limits)
+        if times is None:
+            continue
+        taken += 1
+        ours, ours0 = ours + segment.plan.total, ours0 + plain[k].plan.total
+        t2, t3 = t2 + times[0], t3 + times[1]
+    print(f"  third-order reference on {taken} random feed sequences ({time.perf_counter() - clock:.0f} s): "
+          f"copp-py TOPP3-LP T3 / T2 = {t3 / t2:.4f}; the plan T / T0 = {ours / ours0:.4f}, T / T3 = {ours / t3:.4f}")
 
 
 def main() -> None:
@@ -86,9 +114,10 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--short", type=int, default=10_000)
     parser.add_argument("--engines", default="copp,toppra", help="TOPP2 engines to compare, the first the default")
+    parser.add_argument("--topp3", type=int, default=40, help="feed sequences sampled for TOPP3 (0: none)")
     args = parser.parse_args()
     for points in (args.short, args.points):
-        measure(points, tuple(args.engines.split(",")))
+        measure(points, tuple(args.engines.split(",")), args.topp3)
 
 
 if __name__ == "__main__":
