@@ -105,7 +105,8 @@ def _third_order_reference(blocks: Blocks, speed: np.ndarray, limits: Limits, fe
         taken += 1
         ours, ours0 = ours + segment.plan.total, ours0 + plain[k].plan.total
         t2, t3 = t2 + times[0], t3 + times[1]
-    print(f"  third-order reference on {taken} random feed sequences ({time.perf_counter() - clock:.0f} s): "
+    print(f"  third-order reference on {taken} random feed sequences ({time.perf_counter() - clock:.0f} s; "
+          f"{min(sample, len(feed)) - taken} with a rotary-only block or where the LP failed left out): "
           f"copp-py TOPP3-LP T3 / T2 = {t3 / t2:.4f}; the plan T / T0 = {ours / ours0:.4f}, T / T3 = {ours / t3:.4f}")
 
 
@@ -114,10 +115,10 @@ def main() -> None:
     parser.add_argument("--points", type=int, default=100_000)
     parser.add_argument("--short", type=int, default=10_000)
     parser.add_argument("--engines", default="copp,toppra", help="TOPP2 engines to compare, the first the default")
-    parser.add_argument("--topp3", type=int, default=40, help="feed sequences sampled for TOPP3 (0: none)")
+    parser.add_argument("--topp3", type=int, default=40, help="sequences of the long job for TOPP3 (0: none)")
     args = parser.parse_args()
-    for points in (args.short, args.points):
-        measure(points, tuple(args.engines.split(",")), args.topp3)
+    for points, sample in ((args.short, 0), (args.points, args.topp3)):
+        measure(points, tuple(args.engines.split(",")), sample)
 
 
 if __name__ == "__main__":

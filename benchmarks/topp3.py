@@ -33,7 +33,8 @@ LINEARISATIONS = 3
 def topp3_reference(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits
                     ) -> tuple[float, float] | None:
     """(T2, T3) in s of one feed sequence from rest to rest: copp-py's TOPP2 and TOPP3-LP on the
-    same stations and caps; None for a sequence with a rotary-only block (no tip motion to cap)."""
+    same stations and caps (T3 of the last linearisation the LP solved within its constraints);
+    None for a sequence with a rotary-only block (no tip motion to cap) or where the LP failed."""
     import copp_py as copp
 
     chords = np.linalg.norm(np.diff(tip, axis=0), axis=1)
@@ -56,13 +57,16 @@ def topp3_reference(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limit
     problem = copp.solver.topp2_ra.Problem(robot.constraints, (0, n - 1), (0.0, 0.0))
     a2 = np.maximum(np.asarray(copp.solver.topp2_ra.solve(problem)), 0.0)
     t2, _ = copp.interpolation.s_to_t_topp2(s, a2)
-    reference, b = np.maximum(a2, 1e-6 * a2.max()), None
+    reference, b, t3 = np.maximum(a2, 1e-6 * a2.max()), None, None
     for _ in range(LINEARISATIONS):
-        profile = copp.solver.topp3_lp.solve(
-            copp.solver.topp3_lp.Problem(robot.constraints, reference, b_linearization=b))
+        try:
+            profile = copp.solver.topp3_lp.solve(
+                copp.solver.topp3_lp.Problem(robot.constraints, reference, b_linearization=b))
+        except copp.CoppError:  # Clarabel's "InsufficientProgress": keep the last profile it solved
+            break
         profile.force_positive_a(s)
         if max(robot.constraints.exceed_topp3(profile)) > 1e-6:
-            raise RuntimeError("copp-py's TOPP3 profile exceeds its own constraints")
+            break
         reference, b = np.maximum(profile.a, 1e-9), profile.b
-    t3, _ = copp.interpolation.s_to_t_topp3(s, profile)
-    return float(t2), float(t3)
+        t3, _ = copp.interpolation.s_to_t_topp3(s, profile)
+    return None if t3 is None else (float(t2), float(t3))
