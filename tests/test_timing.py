@@ -365,12 +365,14 @@ def _time_optimal_rest_to_rest(distance: float, v: float, a: float, j: float) ->
 def test_short_moves_that_turn_without_cruise_are_near_the_time_optimal_ones(limits: Limits) -> None:
     """A move too short to reach its feed accelerates then slows down at once (a re-orientation
     in place, a short link): the filter would double the jerk at that turn, so the plan gets a
-    plateau of one filter width instead of a lower acceleration. Straight moves of one slider or
-    of the tilt, long enough to need full acceleration: within 8 % of the time-optimal S-curve
-    (lowering the acceleration, as before, took 12 to 23 % more), and within every limit."""
+    plateau of one filter width instead of a lower acceleration, and a window as narrow as the
+    ramp to its peak speed needs. Straight moves of one slider or of the tilt, with and without
+    full acceleration: within 8 % of the time-optimal S-curve (lowering the acceleration, as
+    before, took 12 to 23 % more), and within every limit."""
     rng = np.random.default_rng(11)
     sequences, optimal, moving = [], [], []
-    for joint, low, high in ((0, 55.0, 100.0), (2, 55.0, 100.0), (3, 0.16, 1.0)):  # mm, mm, rad
+    for joint, low, high in ((0, 8.0, 45.0), (0, 55.0, 100.0), (2, 55.0, 100.0), (3, 0.03, 0.15),
+                             (3, 0.16, 1.0)):  # mm, mm, mm, rad, rad
         for distance in rng.uniform(low, high, 4):
             joints = np.tile([600.0, 650.0, 700.0, 0.2, 0.5], (41, 1))
             joints[:, joint] += np.linspace(0.0, distance, 41)

@@ -107,6 +107,7 @@ _SHRINK = 0.97  # extra factor applied when lowering caps after a violation
 # A jerk excess at least this large is taken for a turn without cruise (module docstring, step 4):
 # the filter doubles the jerk there, while other excesses are a few per cent.
 _TURN_JERK = 1.3
+_NARROWER = 0.9  # a turn's window is narrowed to its own ramp's if that is this much narrower
 
 
 @dataclass(frozen=True, eq=False)
@@ -700,14 +701,21 @@ class _Planner:
         # and u / w within the jerk limit: |sddot| <= w J_j / max |q_j'|.
         a = checks.clip(gseq, checks.search(gseq, np.minimum(grid - r, lo0), "left"))
         b = np.maximum(a, checks.clip(gseq, checks.search(gseq, np.maximum(grid + r, hi0), "right") - 1))
-        usable = lim.acceleration[:, None]
-        if batch.jerk:
-            usable = np.minimum(usable, self.w[cseq] * lim.jerk[:, None])
-        need = np.max(np.abs(batch.path(batch.path.locate(cseq, check), check, 1)) / usable, axis=0)
-        with np.errstate(divide="ignore"):
-            self.umax = np.minimum(1.0 / _range_max(need, a, b), 1e300)
+        # 1 / bound = max(max_j |q_j'| / a_j, max_j |q_j'| / J_j / w): both kept, for a new w.
+        tangent = np.abs(batch.path(batch.path.locate(cseq, check), check, 1))
+        self.need_acc = _range_max(np.max(tangent / lim.acceleration[:, None], axis=0), a, b)
+        self.need_jerk = _range_max(np.max(tangent / lim.jerk[:, None], axis=0), a, b) if batch.jerk else None
+        self._acceleration_bound()
         piece = batch.path.locate(gseq, grid)
         self.q1, self.q2 = (d.T for d in batch.path.derivatives(piece, grid, (1, 2)))  # (G, 5)
+
+    def _acceleration_bound(self) -> None:
+        """The path acceleration bound umax (1/s^2) at the gridpoints for the current widths."""
+        need = self.need_acc
+        if self.need_jerk is not None:
+            need = np.maximum(need, self.need_jerk / self.w[self.grid.owner])
+        with np.errstate(divide="ignore"):
+            self.umax = np.minimum(1.0 / need, 1e300)
 
     # -- rounds ---------------------------------------------------------------------------------
 
@@ -768,6 +776,18 @@ class _Planner:
             cap = np.minimum(cap, np.where(fx_grid < 1.0, fx_grid * np.maximum(x, 0.0), np.inf))
             # A turn without cruise (module docstring, step 4): a plateau, not a lower acceleration.
             turns = np.array([r for r in failing if worst[int(r)][2] >= _TURN_JERK and not plateaued[r]], dtype=int)
+            if len(turns):
+                # A peak too slow to need full acceleration wants a narrower window first (the
+                # time-optimal ramp to V has w = sqrt(V / J)); its plateau comes the round after.
+                peak = np.array([grid.first[r] + int(np.argmax(x[grid.first[r]:grid.first[r + 1]])) for r in turns])
+                ramp = np.sqrt(np.max(np.abs(self.q1[peak]) * np.sqrt(np.maximum(x[peak], 0.0))[:, None]
+                                      / self.batch.limits.jerk, axis=1))
+                narrower = ramp < _NARROWER * self.w[turns]
+                if np.any(narrower):
+                    self.w[turns[narrower]] = ramp[narrower]
+                    self._acceleration_bound()
+                    fa_grid[np.isin(grid.owner, turns[narrower])] = 1.0
+                    turns = turns[~narrower]
             if len(turns):
                 level = np.full(count, np.nan)
                 level[turns] = _plateau_levels(grid, x, turns, self.w[turns])
