@@ -52,7 +52,9 @@ planned in four steps:
    at the level where the profile cruises for one filter width: the two steps of u then fall
    in different windows. For a straight move this filter of an accelerate-cruise-decelerate
    profile is exactly the time-optimal jerk-limited (7-segment) S-curve, the cruise of the
-   unfiltered profile becoming the jerk-free stretch where the acceleration changes sign.
+   unfiltered profile becoming the jerk-free stretch where the acceleration changes sign, once
+   the window is the one the ramp to the peak speed needs: a peak too slow for full
+   acceleration first gets the narrower ``sqrt(V / J)``, then its plateau.
 
 Every step is vectorised over all the sequences together (arrays concatenated, each element
 knowing its sequence); only the TOPP2 solve runs once per sequence. Positions within a sequence
@@ -732,7 +734,7 @@ class _Planner:
         x = np.zeros(n)
         active = np.arange(count)
         worst: dict[int, tuple[float, float, float, float]] = {}
-        plateaued = np.zeros(count, bool)
+        narrowed, plateaued = np.zeros(count, bool), np.zeros(count, bool)
         for attempt in range(self.max_refinements + 1):
             solved = []
             xmax = np.minimum(base, cap)
@@ -782,9 +784,10 @@ class _Planner:
                 peak = np.array([grid.first[r] + int(np.argmax(x[grid.first[r]:grid.first[r + 1]])) for r in turns])
                 ramp = np.sqrt(np.max(np.abs(self.q1[peak]) * np.sqrt(np.maximum(x[peak], 0.0))[:, None]
                                       / self.batch.limits.jerk, axis=1))
-                narrower = ramp < _NARROWER * self.w[turns]
+                narrower = (ramp < _NARROWER * self.w[turns]) & ~narrowed[turns]
                 if np.any(narrower):
                     self.w[turns[narrower]] = ramp[narrower]
+                    narrowed[turns[narrower]] = True
                     self._acceleration_bound()
                     fa_grid[np.isin(grid.owner, turns[narrower])] = 1.0
                     turns = turns[~narrower]
