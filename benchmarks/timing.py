@@ -11,8 +11,8 @@ jerk-limited look-ahead baseline with per-block S-curves (benchmarks/scurve.py, 
 with S-curve planning run G-code; the issue's target is T below it), and T / LB, T / baseline,
 T / S-curve baseline; and the same plan without jerk limits (T0, the trapezoid's own
 assumptions). Rapids are the same ruckig moves in all of them and are left out. Then, on a
-random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what an exact
-third-order method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same sample.
+random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what a third-order
+method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same sample.
 """
 
 from __future__ import annotations
@@ -62,8 +62,7 @@ def measure(points: int, engines: tuple[str, ...], sample: int) -> None:
     feed = [s for s in reference.segments if not s.rapid]
     bound = baseline = scurve = 0.0
     for segment in feed:
-        rows = np.arange(segment.first - 1, segment.last + 1)
-        args = (blocks.joints[rows], blocks.tip[rows], speed[segment.first:segment.last + 1], limits)
+        args = (*_sequence(blocks, speed, segment), limits)
         bound += lower_bound_time(*args, angular_feed=rotary)
         baseline += baseline_time(*args, angular_feed=rotary)
         scurve += scurve_baseline_time(*args, angular_feed=rotary)
@@ -88,6 +87,12 @@ def measure(points: int, engines: tuple[str, ...], sample: int) -> None:
         _third_order_reference(blocks, speed, limits, feed, plain, sample)
 
 
+def _sequence(blocks: Blocks, speed: np.ndarray, segment: Segment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A feed sequence's waypoints (joints, tips: from the block before its first) and block feeds."""
+    rows = np.arange(segment.first - 1, segment.last + 1)
+    return blocks.joints[rows], blocks.tip[rows], speed[segment.first:segment.last + 1]
+
+
 def _third_order_reference(blocks: Blocks, speed: np.ndarray, limits: Limits, feed: list[Segment],
                            plain: list[Segment], sample: int) -> None:
     """copp-py's TOPP3-LP (benchmarks/topp3.py) on a random sample of the feed sequences, beside
@@ -98,8 +103,7 @@ def _third_order_reference(blocks: Blocks, speed: np.ndarray, limits: Limits, fe
     clock = time.perf_counter()
     for k in sorted(rng.choice(len(feed), size=min(sample, len(feed)), replace=False)):
         segment = feed[k]
-        rows = np.arange(segment.first - 1, segment.last + 1)
-        times = topp3_reference(blocks.joints[rows], blocks.tip[rows], speed[segment.first:segment.last + 1], limits)
+        times = topp3_reference(*_sequence(blocks, speed, segment), limits)
         if times is None:
             continue
         taken += 1

@@ -564,6 +564,16 @@ def _sorted_points(seq: np.ndarray, x: np.ndarray, count: int) -> tuple[np.ndarr
 # --------------------------------------------------------------------------------------------
 
 
+def _peaks(grid: _Pieces, x: np.ndarray, seqs: np.ndarray) -> np.ndarray:
+    """Per sequence of ``seqs``, the gridpoint (global index) where x is largest, the first if tied."""
+    counts = grid.first[seqs + 1] - grid.first[seqs]
+    gi = _ranges(grid.first[seqs], grid.first[seqs + 1])
+    owner = np.repeat(np.arange(len(seqs)), counts)
+    top = np.maximum.reduceat(x[gi], np.r_[0, np.cumsum(counts)[:-1]])
+    at_top = np.flatnonzero(x[gi] == top[owner])
+    return gi[at_top[np.searchsorted(owner[at_top], np.arange(len(seqs)))]]
+
+
 def _plateau_levels(grid: _Pieces, x: np.ndarray, seqs: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Per sequence of ``seqs``, the squared path speed L (1/s^2) below its peak at which the
     profile x (squared path speeds at the gridpoints, zero at both ends), capped at L, cruises
@@ -574,13 +584,11 @@ def _plateau_levels(grid: _Pieces, x: np.ndarray, seqs: np.ndarray, w: np.ndarra
     steeply): its duration falls as L rises, so L is found by bisection, all the sequences at
     once.
     """
-    counts = grid.first[seqs + 1] - grid.first[seqs]
     gi = _ranges(grid.first[seqs], grid.first[seqs + 1])
-    owner = np.repeat(np.arange(len(seqs)), counts)
+    owner = np.repeat(np.arange(len(seqs)), grid.first[seqs + 1] - grid.first[seqs])
     s, xs = grid.start[gi], np.maximum(x[gi], 0.0)
-    top = np.maximum.reduceat(xs, np.r_[0, np.cumsum(counts)[:-1]])
-    at_top = np.flatnonzero(xs == top[owner])
-    peak = at_top[np.searchsorted(owner[at_top], np.arange(len(seqs)))]
+    peak = np.searchsorted(gi, _peaks(grid, x, seqs))  # local to gi
+    top = xs[peak]
     index = np.arange(len(xs))
 
     def cruise(level: np.ndarray) -> np.ndarray:
@@ -781,7 +789,7 @@ class _Planner:
             if len(turns):
                 # A peak too slow to need full acceleration wants a narrower window first (the
                 # time-optimal ramp to V has w = sqrt(V / J)); its plateau comes the round after.
-                peak = np.array([grid.first[r] + int(np.argmax(x[grid.first[r]:grid.first[r + 1]])) for r in turns])
+                peak = _peaks(grid, x, turns)
                 ramp = np.sqrt(np.max(np.abs(self.q1[peak]) * np.sqrt(np.maximum(x[peak], 0.0))[:, None]
                                       / self.batch.limits.jerk, axis=1))
                 narrower = (ramp < _NARROWER * self.w[turns]) & ~narrowed[turns]
