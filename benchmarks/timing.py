@@ -10,9 +10,14 @@ joint velocity clamping and no jerk limit (how common CNC controllers plan), the
 jerk-limited look-ahead baseline with per-block S-curves (benchmarks/scurve.py, how controllers
 with S-curve planning run G-code; the issue's target is T below it), and T / LB, T / baseline,
 T / S-curve baseline; and the same plan without jerk limits (T0, the trapezoid's own
-assumptions). Rapids are the same ruckig moves in all of them and are left out. Then, on a
-random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what a third-order
-method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same sample.
+assumptions), also on a grid four times finer: a verified plan too, so an upper bound on the
+second-order optimum, which the default grid overestimates. Beside them the jerk-limited lower
+bound LB3 (benchmarks/jerk_bound.py): no plan within the jerk limits can be faster, so T / LB3
+is what is left to win and LB3 / T0 (fine) the least any jerk-limited plan costs over the
+second-order optimum. Rapids are the same ruckig moves in all of them and are left out. Then, on
+a random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what a
+third-order method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same
+sample.
 """
 
 from __future__ import annotations
@@ -23,16 +28,20 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import contextlib  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import verne_post as vp  # noqa: E402
+from benchmarks.jerk_bound import jerk_lower_bounds  # noqa: E402
 from benchmarks.pipeline import _generator  # noqa: E402
 from benchmarks.scurve import scurve_baseline_time  # noqa: E402
 from benchmarks.topp3 import topp3_reference  # noqa: E402
+from verne_post import feed_planner  # noqa: E402
 from verne_post.linearise import Blocks  # noqa: E402
 from verne_post.pipeline import PostOptions, feed_speed, postprocess  # noqa: E402
 from verne_post.schedule import Schedule, Segment, plan_program  # noqa: E402
@@ -68,23 +77,42 @@ def measure(points: int, engines: tuple[str, ...], sample: int) -> None:
         scurve += scurve_baseline_time(*args, angular_feed=rotary)
     plain = [s for s in plan(engines[0], 1, jerk=False)[0].segments if not s.rapid]
     without_jerk = sum(s.plan.total for s in plain)
+    with _finer_grid(4):
+        fine = sum(s.plan.total for s in plan(engines[0], 1, jerk=False)[0].segments if not s.rapid)
+    jerk_bound = float(np.sum(jerk_lower_bounds([_sequence(blocks, speed, s) for s in feed], limits,
+                                                angular_feed=rotary)))
     count = len(blocks.joints)
     print(f"\njob of {len(result.poses):,} CL points, {count:,} blocks, {len(feed)} feed sequences")
     print(f"  lower bound LB                {bound:8.1f} s  (no acceleration limit)")
     print(f"  trapezoidal baseline          {baseline:8.1f} s  (look-ahead, no jerk limit)")
     print(f"  S-curve baseline              {scurve:8.1f} s  (look-ahead, per-block jerk-limited S-curves)")
     print(f"  plan without jerk limits T0   {without_jerk:8.1f} s  T0 / LB = {without_jerk / bound:.3f}")
+    print(f"  T0 on a 4x finer grid         {fine:8.1f} s  T0 (fine) / LB = {fine / bound:.3f}")
+    print(f"  jerk-limited lower bound LB3  {jerk_bound:8.1f} s  LB3 / T0 = {jerk_bound / without_jerk:.4f}, "
+          f"LB3 / T0 (fine) = {jerk_bound / fine:.4f}, LB3 / LB = {jerk_bound / bound:.4f}  (no plan is faster)")
     print(f"  {'engine':8} {'processes':>9} {'planning s':>10} {'blocks/s':>9} {'T s':>8} {'T/T0':>6} {'T/LB':>6} "
-          f"{'T/trap':>6} {'T/S-curve':>9}")
+          f"{'T/trap':>6} {'T/S-curve':>9} {'T/LB3':>6}")
     for engine in engines:
         for workers in (1, os.cpu_count() or 1):
             schedule, seconds = plan(engine, workers)
             total = sum(s.plan.total for s in schedule.segments if not s.rapid)
             print(f"  {engine:8} {workers:9d} {seconds:10.2f} {count / seconds:9,.0f} {total:8.1f} "
-                  f"{total / without_jerk:6.3f} {total / bound:6.3f} {total / baseline:6.3f} {total / scurve:9.3f}")
+                  f"{total / without_jerk:6.3f} {total / bound:6.3f} {total / baseline:6.3f} {total / scurve:9.3f} "
+                  f"{total / jerk_bound:6.3f}")
     print("  targets: planning >= 50,000 blocks/s on 2 cores; T / T0 <= 1.02; T / LB <= 1.07; T / S-curve < 1")
     if sample:
         _third_order_reference(blocks, speed, limits, feed, plain, sample)
+
+
+@contextlib.contextmanager
+def _finer_grid(factor: float) -> Iterator[None]:
+    """The planner's TOPP2 grid ``factor`` times finer (intervals per filter width, and per block)."""
+    saved = feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK
+    feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK = (x * factor for x in saved)
+    try:
+        yield
+    finally:
+        feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK = saved
 
 
 def _sequence(blocks: Blocks, speed: np.ndarray, segment: Segment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

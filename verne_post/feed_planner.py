@@ -17,12 +17,16 @@ planned in four steps:
    the same parameter (rotary-only blocks: ``|d(theta1, theta2)/ds| * sdot <= angular_feed``);
    a minimum block duration; pointwise the joint velocity limits ``|q_j'(s)| sdot <= v_j`` and
    a centripetal-jerk cap ``|q_j'''(s)| sdot^3 <= 0.7 J_j``, evaluated at every waypoint, block
-   middle and gridpoint, so the feed holds on every block even where the grid is coarser.
+   middle and gridpoint, so the feed holds on every block even where the grid is coarser (the
+   squared path speed being linear in s between gridpoints, the gridpoints of an interval are
+   lowered until its line meets every cap inside it: a cap that changes along the path, as the
+   tip's speed per unit of s does, is followed, not its lowest value over two intervals).
 2. TOPP2 (:mod:`verne_post.topp`: copp-py by default, toppra as the reference) with those caps
    and the joint accelerations ``|q_j' sddot + q_j'' sdot^2| <= 0.97 a_j``, time-scaled so the
    squared path speeds are O(1). A grid interval every ``w / 4`` of travel at the capped speed
    (long blocks subdivided, runs of short blocks merged), at least 32, at most about one per
-   block: the cost follows the path's duration, not its waypoint count.
+   block: the cost follows the path's duration, not its waypoint count; the intervals at either
+   end halved until they take at most ``w / 4`` (the ramp from rest lasts one interval).
 3. Jerk: the constant-acceleration profile sigma(t) is filtered by a moving average of width w
    (an FIR filter along the path, as CNC controllers limit jerk, so the motion stays on the
    path): ``s(t) = 1/w * integral_{t-w}^{t} sigma``, a piecewise cubic whose path jerk is
@@ -99,6 +103,7 @@ _SAFE_FIR_FACTOR = 1.25
 _TRIES = ((0.1, False), (0.5, True))
 _GRID_PER_WINDOW = 4  # target grid intervals per filter width, at the capped speed
 _MIN_INTERVALS = 32
+_END_HALVINGS, _MAX_END_HALVINGS = 4, 16  # halvings of each end's interval, at least and at most
 _MAX_INTERVALS_PER_BLOCK = 1.0  # grid intervals per block, on average at most (plus a constant)
 # (acceleration factor, time-scale factor) tried in turn when the TOPP2 engine fails numerically
 _RETRIES = ((1.0, 1.0), (0.999, 0.1), (0.99, 0.43), (0.98, 2.3), (0.97, 10.0))
@@ -657,8 +662,8 @@ class _Planner:
             ramp = np.sqrt(np.max(speed / lim.jerk[:, None], axis=0))
             self.w = np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]), self.widest)
         blocks = np.diff(bfirst)
-        delta = (self.w if batch.jerk else np.full(count, 0.05)) / _GRID_PER_WINDOW
-        delta = np.maximum(np.minimum(delta, t_est / _MIN_INTERVALS), t_est / (_MAX_INTERVALS_PER_BLOCK * blocks
+        window = (self.w if batch.jerk else np.full(count, 0.05)) / _GRID_PER_WINDOW
+        delta = np.maximum(np.minimum(window, t_est / _MIN_INTERVALS), t_est / (_MAX_INTERVALS_PER_BLOCK * blocks
                                                                                 + _MIN_INTERVALS))
         # Gridpoints: waypoints where the travel time at the caps crosses a multiple of delta,
         # long blocks subdivided, and a geometrically refined start and end (from and to rest).
@@ -679,11 +684,25 @@ class _Planner:
         interior = path.start[long][owner] + ds[long][owner] * step / parts[owner]
         kept = np.flatnonzero(keep)
         kfirst = np.searchsorted(kept, batch.wfirst)
-        second, penultimate = s[kept[kfirst[:-1] + 1]], s[kept[kfirst[1:] - 2]]
-        ends = (np.minimum(second, 1.0 - penultimate)[:, None] * 0.5 ** np.arange(1, 5)).ravel()
-        end_seq = np.repeat(np.arange(count), 4)
-        gseq, grid, gfirst = _sorted_points(np.concatenate([wseq[kept], bseq[long][owner], end_seq, end_seq]),
-                                            np.concatenate([s[kept], interior, ends, 1.0 - ends]), count)
+        # The first and last intervals halved until they take at most w / 4 at the caps: TOPP2
+        # holds the path acceleration over an interval, so a ramp from rest lasts the whole
+        # first interval (a long block at a slow feed, coarsely gridded, lost one interval at
+        # each end: 6 % of a plunge).
+        piece = ds.copy()
+        piece[long] /= parts
+        first_block, last_block = bfirst[:-1], bfirst[1:] - 1
+        start_gap = np.minimum(s[kept[kfirst[:-1] + 1]], piece[first_block])
+        end_gap = np.minimum(1.0 - s[kept[kfirst[1:] - 2]], piece[last_block])
+        ends, end_seq = [], []
+        for gap, block, mirror in ((start_gap, first_block, False), (end_gap, last_block, True)):
+            seconds = gap * tau[block] / ds[block]
+            halvings = np.clip(np.ceil(np.log2(seconds / window)), _END_HALVINGS, _MAX_END_HALVINGS).astype(int)
+            at = _ranges(np.zeros(count, int), halvings) + 1
+            point = np.repeat(gap, halvings) * 0.5 ** at
+            ends.append(1.0 - point if mirror else point)
+            end_seq.append(np.repeat(np.arange(count), halvings))
+        gseq, grid, gfirst = _sorted_points(np.concatenate([wseq[kept], bseq[long][owner], *end_seq]),
+                                            np.concatenate([s[kept], interior, *ends]), count)
         self.grid = _Pieces(grid, gfirst)
         n = len(grid)
         # Check points: the gridpoints, the middles of their intervals, the waypoints, the block middles.
@@ -695,12 +714,27 @@ class _Planner:
         raw = batch.point_cap(cseq, check)
         # With the filter, the speed at a point mixes the speeds within half a filter width of
         # travel around it: each check point imposes its cap over erode * w * (its own capped
-        # speed) on either side, and a gridpoint takes the lowest cap reaching its two grid
-        # intervals (the squared speed is linear in s between gridpoints).
+        # speed) on either side. The squared speed is linear in s between gridpoints, so the
+        # gridpoints within that range take the cap, and the two intervals it ends in are
+        # lowered at both ends until their line meets it at the range's ends.
         reach = erode * self.w[cseq] * np.sqrt(raw)
-        lo = self.grid.clip(cseq, self.grid.search(cseq, check - reach, "left") - 1)
-        hi = self.grid.clip(cseq, self.grid.search(cseq, check + reach, "right"))
-        self.xcap = _range_chmin(n, lo, hi, raw)
+        lo = self.grid.search(cseq, check - reach, "left")
+        hi = self.grid.search(cseq, check + reach, "right") - 1
+        inside = lo <= hi
+        xcap = _range_chmin(n, lo[inside], hi[inside], raw[inside])
+        scale = np.ones(n)  # per interval, by its left gridpoint
+        # The gridpoint at or before each end of the range: the one before the first inside it,
+        # the last inside it (an end on a gridpoint gives a weight of 1 or 0: the same line).
+        for end, left in ((np.clip(check - reach, 0.0, 1.0), lo - 1), (np.clip(check + reach, 0.0, 1.0), hi)):
+            left = self.grid.clip(cseq, left)
+            right = np.minimum(left + 1, gfirst[cseq + 1] - 1)
+            span = grid[right] - grid[left]
+            weight = np.divide(end - grid[left], span, out=np.zeros_like(span), where=span > 0)
+            line = xcap[left] + weight * (xcap[right] - xcap[left])
+            np.minimum.at(scale, left, np.minimum(raw / line, 1.0))
+        before = np.r_[1.0, scale[:-1]]
+        before[gfirst[:-1]] = 1.0
+        self.xcap = xcap * np.minimum(scale, before)
         index = np.arange(n)
         lo0 = grid[np.maximum(index - 1, gfirst[gseq])]
         hi0 = grid[np.minimum(index + 1, gfirst[gseq + 1] - 1)]
