@@ -6,22 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 import verne_post as vp
 from benchmarks.jerk_bound import jerk_lower_bounds, rest_to_rest_time, time_from_rest
 from tests.paths import helix, zigzag
+from tests.reference import ruckig_time
 from verne_post.feed_planner import plan_feeds
 from verne_post.timing import Limits, lower_bound_time
-
-
-def _ruckig_time(length: float, velocity: float, acceleration: float, jerk: float) -> float:
-    inp = InputParameter(1)
-    inp.current_position, inp.target_position = [0.0], [length]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [velocity], [acceleration], [jerk]
-    trajectory = Trajectory(1)
-    assert Ruckig(1).calculate(inp, trajectory) in (Result.Working, Result.Finished)
-    return trajectory.duration
 
 
 def test_rest_to_rest_time_is_ruckigs_time_optimal_move() -> None:
@@ -29,7 +20,7 @@ def test_rest_to_rest_time_is_ruckigs_time_optimal_move() -> None:
     for _ in range(500):
         v, a, j, length = 10 ** rng.uniform(-1, 3), 10 ** rng.uniform(0, 5), 10 ** rng.uniform(1, 7), \
             10 ** rng.uniform(-4, 3)
-        assert rest_to_rest_time(length, v, a, j) == pytest.approx(_ruckig_time(length, v, a, j), rel=1e-7)
+        assert rest_to_rest_time(length, v, a, j) == pytest.approx(ruckig_time(length, v, a, j), rel=1e-7)
 
 
 def test_time_from_rest_inverts_the_integrated_fastest_speed() -> None:
@@ -87,7 +78,7 @@ def test_a_straight_move_bound_is_its_s_curve() -> None:
         joints[1, 0] += length
         tip = np.array([[0.0, 0.0, 0.0], [2.0 * length, 0.0, 0.0]])
         seqs.append((joints, tip, np.array([feed])))
-        expected.append(_ruckig_time(length, min(1000.0, feed / 2.0), 10_000.0, 200_000.0))
+        expected.append(ruckig_time(length, min(1000.0, feed / 2.0), 10_000.0, 200_000.0))
     bounds = jerk_lower_bounds(seqs, limits)
     np.testing.assert_allclose(bounds, expected, rtol=1e-7)
     plans = plan_feeds(seqs, limits, angular_feed=1.0)

@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
-from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 import verne_post as vp
 from benchmarks.scurve import scurve_baseline_time
 from tests.paths import helix
+from tests.reference import ruckig_time
 from verne_post.timing import Limits, baseline_time, lower_bound_time
 
 V, A, J = 1000.0, 10_000.0, 200_000.0  # a^2 / J = 500 mm/s: the speed above which a full ramp reaches a
@@ -57,15 +57,6 @@ def test_a_short_move_that_reaches_a_but_not_the_feed() -> None:
     assert time == pytest.approx(2 * (vp_ / A + A / J), rel=1e-9)
 
 
-def _ruckig_time(length: float, velocity: float, acceleration: float, jerk: float) -> float:
-    inp = InputParameter(1)
-    inp.current_position, inp.target_position = [0.0], [length]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [velocity], [acceleration], [jerk]
-    trajectory = Trajectory(1)
-    assert Ruckig(1).calculate(inp, trajectory) in (Result.Working, Result.Finished)
-    return trajectory.duration
-
-
 def test_single_blocks_take_ruckigs_time_optimal_rest_to_rest_time() -> None:
     # One straight block from rest to rest: the 7-segment S-curve is time-optimal, as ruckig finds
     # it; the tip moving k times as far as rho1 scales the block's speed, a and J by k.
@@ -76,7 +67,7 @@ def test_single_blocks_take_ruckigs_time_optimal_rest_to_rest_time() -> None:
         limits = Limits(np.full(5, velocity), np.full(5, acceleration), np.full(5, jerk))
         feed = rng.choice([1e9, rng.uniform(0.2, 1.0) * k * velocity])  # the joint's limit or a lower feed
         time = scurve_baseline_time(*_line([length], k), np.array([feed]), limits)
-        expected = _ruckig_time(length, min(velocity, feed / k), acceleration, jerk)
+        expected = ruckig_time(length, min(velocity, feed / k), acceleration, jerk)
         assert time == pytest.approx(expected, rel=1e-6, abs=1e-9)
 
 
