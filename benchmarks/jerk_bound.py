@@ -35,10 +35,11 @@ Everything is vectorised over all the blocks of all the sequences together.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from benchmarks.scurve import ramp_time
 from verne_post.timing import TIP_EPS, Limits, block_min_time, checked_sequence
 
 __all__ = ["jerk_lower_bounds", "rest_to_rest_time", "time_from_rest"]
@@ -78,7 +79,7 @@ def rest_to_rest_time(distance: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.
     distance, v, a, j = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (distance, v, a, j)))
 
     def ramp(peak: np.ndarray) -> np.ndarray:
-        return np.where(peak * j <= a * a, 2.0 * np.sqrt(peak / j), peak / a + a / j)
+        return ramp_time(0.0, peak, a, j)
 
     with np.errstate(invalid="ignore", divide="ignore"):
         cruise = 2.0 * ramp(v) + (distance - v * ramp(v)) / v
@@ -103,6 +104,20 @@ def _segment_scan(values: np.ndarray, seq: np.ndarray, op: np.ufunc) -> np.ndarr
     return out
 
 
+def _least_time(move: Callable[..., np.ndarray], displacement: np.ndarray, tip_path: np.ndarray,
+                fastest: np.ndarray, rho: np.ndarray, limits: Limits) -> np.ndarray:
+    """Per row, the least time ``move`` (:func:`time_from_rest` or :func:`rest_to_rest_time`)
+    allows for joint displacements (n, 5) and a tip path (n,) mm at feeds up to ``fastest``
+    (n,) mm/s, the tip moving at most ``rho`` (n, 5) times each joint's speed (module
+    docstring); a joint with no finite positive ratio gives no tip term."""
+    need = np.max(move(displacement, limits.velocity, limits.acceleration, limits.jerk), axis=1)
+    usable = np.isfinite(rho) & (rho > 0)
+    r = np.where(usable, rho, 1.0)
+    tip = move(tip_path[:, None], np.minimum(fastest[:, None], r * limits.velocity), r * limits.acceleration,
+               r * limits.jerk)
+    return np.maximum(need, np.max(np.where(usable, tip, 0.0), axis=1))
+
+
 def _start_gains(dq: np.ndarray, chord: np.ndarray, feed: np.ndarray, block_time: np.ndarray,
                  tip_ratio: np.ndarray, seq: np.ndarray, allowed: np.ndarray, count: int,
                  limits: Limits) -> np.ndarray:
@@ -114,12 +129,7 @@ def _start_gains(dq: np.ndarray, chord: np.ndarray, feed: np.ndarray, block_time
     fastest = _segment_scan(feed, seq, np.maximum)
     rho = _segment_scan(tip_ratio, seq, np.maximum)
     share = _segment_scan(block_time, seq, np.add)
-    need = np.max(time_from_rest(displacement, limits.velocity, limits.acceleration, limits.jerk), axis=1)
-    usable = np.isfinite(rho) & (rho > 0)
-    r = np.where(usable, rho, 1.0)
-    tip = time_from_rest(tip_path[:, None], np.minimum(fastest[:, None], r * limits.velocity),
-                         r * limits.acceleration, r * limits.jerk)
-    need = np.maximum(need, np.max(np.where(usable, tip, 0.0), axis=1))
+    need = _least_time(time_from_rest, displacement, tip_path, fastest, rho, limits)
     gain = np.where(position < allowed[seq], need - share, 0.0)
     out = np.zeros(count)
     np.maximum.at(out, seq, gain)
@@ -149,17 +159,11 @@ def jerk_lower_bounds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarr
         tip_ratio = np.where(moving_tip[:, None] & (dq != 0), chord[:, None] / np.abs(dq), np.inf)
 
     # The whole sequence, rest to rest: each joint's net displacement, and the tip's path.
-    whole = np.max(rest_to_rest_time(net, limits.velocity, limits.acceleration, limits.jerk), axis=1)
     rho = np.full((count, 5), -np.inf)
     np.maximum.at(rho, seq, tip_ratio)
     fastest = np.zeros(count)
     np.maximum.at(fastest, seq, feed)
-    usable = np.isfinite(rho) & (rho > 0)
-    r = np.where(usable, rho, 1.0)
-    tip = rest_to_rest_time(np.bincount(seq, chord, minlength=count)[:, None],
-                            np.minimum(fastest[:, None], r * limits.velocity), r * limits.acceleration,
-                            r * limits.jerk)
-    whole = np.maximum(whole, np.max(np.where(usable, tip, 0.0), axis=1))
+    whole = _least_time(rest_to_rest_time, net, np.bincount(seq, chord, minlength=count), fastest, rho, limits)
 
     # Start (the first half of the blocks) and end (the second half, time reversed).
     half = sizes // 2

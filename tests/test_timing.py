@@ -17,6 +17,7 @@ from scipy.interpolate import CubicSpline
 
 import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
+from tests.reference import ruckig_time
 from verne_post import feed_planner
 from verne_post.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
 from verne_post.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
@@ -359,7 +360,7 @@ def test_long_slow_block_ramps_as_fast_as_the_limits_allow(limits: Limits, jerk:
         joints = np.tile([600.0, 650.0, 700.0, 0.2, 0.5], (2, 1))
         joints[1, 0] += length
         tip = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -length]])
-        best = (_time_optimal_rest_to_rest(length, speed, a, j) if jerk else length / speed + speed / a)
+        best = (ruckig_time(length, speed, a, j) if jerk else length / speed + speed / a)
         plan = plan_feed(joints, tip, np.array([speed]), limits, angular_feed=1.0, jerk=jerk)
         assert best * (1 - 1e-6) <= plan.total <= 1.005 * best, (length, speed, plan.total / best)
         t, dt = _uniform(plan.total)
@@ -388,22 +389,6 @@ def test_feed_is_held_where_the_tip_speed_per_unit_of_path_changes(limits: Limit
     assert bound <= plan.total <= (1.04 if jerk else 1.01) * bound + 0.05, plan.total / bound
 
 
-def _time_optimal_rest_to_rest(distance: float, v: float, a: float, j: float) -> float:
-    """Time (s) of the time-optimal jerk-limited move over ``distance`` from rest to rest, one
-    axis: the 7-segment S-curve (each ramp 0 -> V takes 2 sqrt(V / j), or V / a + a / j once
-    the acceleration saturates, over V / 2 times that), its peak speed found by bisection."""
-    def ramp(speed: float) -> float:
-        return 2.0 * math.sqrt(speed / j) if speed <= a * a / j else speed / a + a / j
-
-    if v * ramp(v) <= distance:  # cruises at v
-        return 2.0 * ramp(v) + (distance - v * ramp(v)) / v
-    lo, hi = 0.0, v
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if mid * ramp(mid) <= distance else (lo, mid)
-    return 2.0 * ramp(lo)
-
-
 def test_short_moves_that_turn_without_cruise_are_near_the_time_optimal_ones(limits: Limits) -> None:
     """A move too short to reach its feed accelerates then slows down at once (a re-orientation
     in place, a short link): the filter would double the jerk at that turn, so the plan gets a
@@ -421,7 +406,7 @@ def test_short_moves_that_turn_without_cruise_are_near_the_time_optimal_ones(lim
             tip = np.zeros((41, 3))
             tip[:, 0] = np.linspace(0.0, 1.0, 41)  # a tip motion of 1 mm: the feed does not bind
             sequences.append((joints, tip, np.full(40, 1e4)))
-            optimal.append(_time_optimal_rest_to_rest(distance, limits.velocity[joint], limits.acceleration[joint],
+            optimal.append(ruckig_time(distance, limits.velocity[joint], limits.acceleration[joint],
                                                       limits.jerk[joint]))
             moving.append(joint)
     plans = plan_feeds(sequences, limits, angular_feed=100.0)
