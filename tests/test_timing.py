@@ -18,7 +18,7 @@ from scipy.interpolate import CubicSpline
 import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
 from tests.reference import ruckig_time
-from verne_post import feed_planner
+from verne_post import feed_planner, schedule
 from verne_post.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
 from verne_post.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
 
@@ -315,6 +315,34 @@ def test_sequences_planned_together_are_planned_as_alone(machine: vp.Machine, li
         check_feed_plan(machine, plan, joints, tip, feed, limits)
 
 
+def test_a_program_split_by_work_over_processes_is_planned_as_in_one(monkeypatch: pytest.MonkeyPatch, limits: Limits,
+                                                                     helix_path: tuple[np.ndarray, np.ndarray]) -> None:
+    """plan_program cuts the feed sequences into contiguous runs of about equal work, this
+    process's the larger by a helper's cost, and gets the same schedule to the last bit on one
+    process as on two or three."""
+    rapid = np.zeros(546, bool)
+    rapid[np.cumsum([1] + [121] * 4 + [2] * 30)] = True  # 4 sequences of 120 blocks, then 30 of one
+    joints, tip = (a[:len(rapid)] for a in helix_path)
+    feed = np.random.default_rng(5).uniform(20.0, 60.0, len(joints))
+    group = np.zeros(len(joints), int)
+    args = (joints, tip, rapid, feed, group, limits)
+    kwargs = {"rotary_feed": 1.0, "corner": math.radians(30.0)}
+    monkeypatch.setattr(schedule, "_PROCESS_WORK", 100)  # this small program is then worth 3 processes
+    ranges = schedule.feed_sequences(joints, rapid, group, limits, kwargs["corner"])
+    work = np.array([b - a + 1 + schedule._SEQUENCE_WORK for a, b in ranges])
+    for parts in (2, 3):
+        runs = schedule._split(list(range(len(ranges))), work, parts)
+        assert len(runs) == parts and [i for run in runs for i in run] == list(range(len(ranges)))
+        done = [work[run].sum() for run in runs]
+        for other in done[1:]:
+            assert abs(done[0] - other - schedule._PROCESS_WORK) <= work.max()
+    one = schedule.plan_program(*args, **kwargs, workers=1)
+    for workers in (2, 3):
+        many = schedule.plan_program(*args, **kwargs, workers=workers)
+        np.testing.assert_array_equal(many.duration, one.duration)
+        assert [(s.first, s.last, s.rapid) for s in many.segments] == [(s.first, s.last, s.rapid) for s in one.segments]
+
+
 def test_batched_splines_are_scipys_not_a_knot_splines() -> None:
     """The one tridiagonal solve for many sequences gives each scipy's CubicSpline (2 to 12 points)."""
     rng = np.random.default_rng(7)
@@ -327,6 +355,35 @@ def test_batched_splines_are_scipys_not_a_knot_splines() -> None:
         a = first[r]
         reference = CubicSpline(x[a:a + n], y[a:a + n], axis=0, bc_type="not-a-knot")
         np.testing.assert_allclose(coef[:, a - r:a - r + n - 1], reference.c, rtol=1e-7, atol=1e-7)
+
+
+def test_piece_search_is_the_exact_search_within_each_sequence() -> None:
+    """_Pieces.search (one real search over the sequences laid end to end, then corrected) finds
+    what searching each sequence's own starts finds, with queries on, and within a few ulps of,
+    the starts, outside the sequences and in empty ones, at scales from 1e-3 to 1e4."""
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        scale = 10.0 ** rng.uniform(-3.0, 4.0)
+        starts = []
+        for count in rng.integers(0, 9, size=int(rng.integers(1, 30))):
+            if rng.random() < 0.5:  # starts packed a few ulps of the shift apart
+                starts.append(scale * (rng.random() + np.cumsum(rng.uniform(1e-15, 1e-11, count))))
+            else:
+                starts.append(np.unique(rng.uniform(0.0, scale, count)))
+        first = np.r_[0, np.cumsum([len(v) for v in starts])]
+        if first[-1] == 0:
+            continue
+        pieces = feed_planner._Pieces(np.concatenate(starts), first)
+        seq = rng.integers(0, len(starts), size=600)
+        x = rng.uniform(-scale, 2.0 * scale, size=600)
+        near = rng.random(600) < 0.8
+        pick = rng.integers(0, first[-1], size=600)
+        seq[near] = pieces.owner[pick[near]]
+        x[near] = pieces.start[pick[near]] * (1.0 + rng.choice([-1.0, 1.0], near.sum())
+                                              * rng.choice([0.0, 1e-16, 3e-16, 1e-15, 1e-13], near.sum()))
+        for side in ("left", "right"):
+            expected = [first[r] + np.searchsorted(starts[r], v, side=side) for r, v in zip(seq, x, strict=True)]
+            np.testing.assert_array_equal(pieces.search(seq, x, side), expected)
 
 
 @pytest.mark.parametrize("speed", [50.0, 300.0, 800.0])

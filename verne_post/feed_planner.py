@@ -302,14 +302,35 @@ class _Pieces:
         return np.repeat(np.arange(len(self.first) - 1), np.diff(self.first))
 
     @cached_property
-    def _keys(self) -> np.ndarray:
-        # (sequence, position) as complex numbers, which numpy orders lexicographically: one
-        # exact sorted array for every search.
-        return self.owner + 1j * self.start
+    def _line(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The sequences laid end to end on one real line, 1 apart beyond their spans: the
+        starts there, each sequence's shift, and the bounds (R,) its queries are clipped to."""
+        count = np.diff(self.first)
+        low, high = np.zeros(len(count)), np.zeros(len(count))
+        some = count > 0
+        low[some] = self.start[self.first[:-1][some]]
+        high[some] = self.start[self.first[1:][some] - 1]
+        shift = np.r_[0.0, np.cumsum(high - low + 2.0)[:-1]] - low
+        return self.start + shift[self.owner], shift, low - 0.5, high + 0.5
 
     def search(self, seq: np.ndarray, x: np.ndarray, side: Literal["left", "right"] = "right") -> np.ndarray:
         """np.searchsorted of local positions x among the starts of sequence seq (global index)."""
-        return np.searchsorted(self._keys, seq + 1j * x, side=side)
+        line, shift, low, high = self._line
+        i = np.searchsorted(line, np.clip(x, low[seq], high[seq]) + shift[seq], side=side)
+        # A real search is twice as fast as one of (sequence, position) pairs. Rounding x + shift
+        # never reorders (rounding is monotonic), it can only tie a start with x: searching
+        # right, i may then be past a start > x; searching left, short of a start < x. Corrected
+        # exactly (rarely more than a pass that finds nothing):
+        while True:
+            if side == "right":
+                wrong = np.flatnonzero((i > self.first[seq]) & (self.start[np.maximum(i - 1, 0)] > x))
+                step = -1
+            else:
+                wrong = np.flatnonzero((i < self.first[seq + 1]) & (self.start[np.minimum(i, len(self.start) - 1)] < x))
+                step = 1
+            if not len(wrong):
+                return i
+            i[wrong] += step
 
     def clip(self, seq: np.ndarray, index: np.ndarray) -> np.ndarray:
         """Indices clipped into the pieces of their sequences."""
@@ -533,21 +554,22 @@ class _Batch:
                    _Pieces(s[left], bfirst, coef[:, DOF:]), np.where(rotary_only, np.inf, feed),
                    np.minimum(np.minimum(tip_cap, rot_cap), dur_cap))
 
-    def point_cap(self, seq: np.ndarray, c: np.ndarray) -> np.ndarray:
+    def point_cap(self, seq: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Squared path-speed caps at local path parameters c: joint velocity, tip feed,
-        centripetal jerk, and the caps of the block(s) c lies in."""
+        centripetal jerk, and the caps of the block(s) c lies in; and |q'(c)| (5, n)."""
         lim = self.limits
         right = self.path.locate(seq, c, "right")
-        left = self.path.locate(seq, c, "left")
-        q1 = np.abs(self.path(right, c, 1))
+        # c on a waypoint lies in both its blocks: the one before is the one searching left finds
+        left = right - ((self.path.start[right] == c) & (right > self.path.first[seq]))
+        q = self.path.derivatives(right, c, (1, 3) if self.jerk else (1,))
+        q1 = np.abs(q[0])
         feed = np.minimum(self.tip_feed[left], self.tip_feed[right])
         with np.errstate(divide="ignore", invalid="ignore"):
             x = np.min((lim.velocity[:, None] / q1) ** 2, axis=0)
             x = np.minimum(x, np.nan_to_num((feed / np.linalg.norm(self.tip(right, c, 1), axis=0)) ** 2, nan=np.inf))
             if self.jerk:
-                q3 = np.abs(self.path(right, c, 3))
-                x = np.minimum(x, np.min((_JERK_CAP_MARGIN * lim.jerk[:, None] / q3) ** (2.0 / 3.0), axis=0))
-        return np.minimum(np.minimum(x, np.minimum(self.block_cap[left], self.block_cap[right]) ** 2), 1e300)
+                x = np.minimum(x, np.min((_JERK_CAP_MARGIN * lim.jerk[:, None] / np.abs(q[1])) ** (2.0 / 3.0), axis=0))
+        return np.minimum(np.minimum(x, np.minimum(self.block_cap[left], self.block_cap[right]) ** 2), 1e300), q1
 
     def waypoint_at(self, seq: int, c: float) -> int:
         """Index (within its sequence) of the first waypoint at or after local path parameter c."""
@@ -557,8 +579,14 @@ class _Batch:
 
 def _sorted_points(seq: np.ndarray, x: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Points (seq, local x) sorted by sequence then x, exact repeats dropped; with offsets (R + 1,)."""
-    order = np.lexsort((x, seq))
+    # x + 2 seq orders the points as (seq, x) does for x in [0, 1], but for ties by rounding:
+    # sorted so (3x faster than a lexsort of the pair, the points being runs already sorted),
+    # then checked exactly.
+    order = np.argsort(x + 2.0 * seq, kind="stable")
     seq, x = seq[order], x[order]
+    if np.any((seq[1:] < seq[:-1]) | ((seq[1:] == seq[:-1]) & (x[1:] < x[:-1]))):
+        order = np.lexsort((x, seq))
+        seq, x = seq[order], x[order]
     keep = np.r_[True, (seq[1:] != seq[:-1]) | (x[1:] != x[:-1])]
     seq, x = seq[keep], x[keep]
     return seq, x, np.searchsorted(seq, np.arange(count + 1))
@@ -646,7 +674,7 @@ class _Planner:
         bseq = path.owner
         ds = np.diff(s)[np.arange(len(bseq)) + bseq]
         mids = path.start + 0.5 * ds
-        x_mid = batch.point_cap(bseq, mids)
+        x_mid, tangent_mid = batch.point_cap(bseq, mids)
         tau = ds / np.sqrt(x_mid)  # s per block at its cap
         t_est = np.add.reduceat(tau, bfirst[:-1])
         self.t_scale = np.maximum(t_est, 1e-6)
@@ -658,7 +686,7 @@ class _Planner:
         elif widest:
             self.w = np.full(count, self.widest)
         else:
-            speed = np.abs(path(np.arange(len(bseq)), mids, 1)) * np.sqrt(x_mid)  # joints at the block caps
+            speed = tangent_mid * np.sqrt(x_mid)  # joints at the block caps
             ramp = np.sqrt(np.max(speed / lim.jerk[:, None], axis=0))
             self.w = np.minimum(np.maximum.reduceat(ramp, bfirst[:-1]), self.widest)
         blocks = np.diff(bfirst)
@@ -711,7 +739,7 @@ class _Planner:
             np.concatenate([gseq, gseq[inner_grid], wseq, bseq]),
             np.concatenate([grid, 0.5 * (grid[inner_grid] + grid[inner_grid + 1]), s, mids]), count)
         checks = _Pieces(check, cfirst)
-        raw = batch.point_cap(cseq, check)
+        raw, tangent = batch.point_cap(cseq, check)
         # With the filter, the speed at a point mixes the speeds within half a filter width of
         # travel around it: each check point imposes its cap over erode * w * (its own capped
         # speed) on either side. The squared speed is linear in s between gridpoints, so the
@@ -746,7 +774,6 @@ class _Planner:
         a = checks.clip(gseq, checks.search(gseq, np.minimum(grid - r, lo0), "left"))
         b = np.maximum(a, checks.clip(gseq, checks.search(gseq, np.maximum(grid + r, hi0), "right") - 1))
         # 1 / bound = max(max_j |q_j'| / a_j, max_j |q_j'| / J_j / w): both kept, for a new w.
-        tangent = np.abs(batch.path(batch.path.locate(cseq, check), check, 1))
         self.need_acc = _range_max(np.max(tangent / lim.acceleration[:, None], axis=0), a, b)
         self.need_jerk = _range_max(np.max(tangent / lim.jerk[:, None], axis=0), a, b) if batch.jerk else None
         self._acceleration_bound()
