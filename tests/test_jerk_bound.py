@@ -64,12 +64,13 @@ def test_no_verified_plan_beats_the_bound(sequences: tuple[list, Limits]) -> Non
     plans = plan_feeds(seqs, limits, angular_feed=1.0)
     for (joints, tip, feed), bound, plan in zip(seqs, bounds, plans, strict=True):
         assert lower_bound_time(joints, tip, feed, limits, angular_feed=1.0) <= bound * (1 + 1e-12)
-        assert bound <= plan.total, (len(feed), bound, plan.total)
+        # a one-block plan is the optimum itself: the two may differ in the last bit
+        assert bound <= plan.total * (1 + 1e-12), (len(feed), bound, plan.total)
 
 
 def test_a_straight_move_bound_is_its_s_curve() -> None:
     """One block of one slider: the bound is the move's own S-curve at the feed (its tip moving
-    twice as far as the slider), which no plan beats and the planner's plan nearly reaches."""
+    twice as far as the slider), which the planner's plan (in closed form) is."""
     limits = Limits(np.full(5, 1000.0), np.full(5, 10_000.0), np.full(5, 200_000.0))
     rng = np.random.default_rng(6)
     seqs, expected = [], []
@@ -83,4 +84,4 @@ def test_a_straight_move_bound_is_its_s_curve() -> None:
     np.testing.assert_allclose(bounds, expected, rtol=1e-7)
     plans = plan_feeds(seqs, limits, angular_feed=1.0)
     for bound, plan in zip(bounds, plans, strict=True):
-        assert bound <= plan.total <= 1.01 * bound
+        assert plan.total == pytest.approx(bound, rel=1e-9)

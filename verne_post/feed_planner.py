@@ -60,6 +60,10 @@ planned in four steps:
    the window is the one the ramp to the peak speed needs: a peak too slow for full
    acceleration first gets the narrower ``sqrt(V / J)``, then its plateau.
 
+A one-block sequence needs none of this: a line in joint space with the same caps all along,
+its time-optimal move is the 7-segment S-curve in s (the trapezoid without jerk limits), in
+closed form, its peaks the limits it meets (:func:`_straight_plans`).
+
 Every step is vectorised over all the sequences together (arrays concatenated, each element
 knowing its sequence); only the TOPP2 solve runs once per sequence. Positions within a sequence
 are kept local (s in [0, 1], t from 0), so precision does not depend on the program's length.
@@ -249,7 +253,13 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
     refused = _refusals(joints, first, limits, max_turn)
     for r, error in refused.items():
         results[r] = error
-    again = np.array([r for r in range(len(results)) if r not in refused], dtype=int)
+    blocks = np.diff(first) - 1
+    straight = np.array([r for r in range(len(results)) if r not in refused and blocks[r] == 1], dtype=int)
+    if len(straight):
+        batch = _Batch.of(*_select(joints, tip, feed, first, straight), limits, angular_feed, min_duration, jerk)
+        for r, plan in zip(straight, _straight_plans(batch), strict=True):
+            results[r] = plan
+    again = np.array([r for r in range(len(results)) if r not in refused and blocks[r] > 1], dtype=int)
     for erode, widest in _TRIES:
         if not len(again):
             break
@@ -590,6 +600,86 @@ def _sorted_points(seq: np.ndarray, x: np.ndarray, count: int) -> tuple[np.ndarr
     keep = np.r_[True, (seq[1:] != seq[:-1]) | (x[1:] != x[:-1])]
     seq, x = seq[keep], x[keep]
     return seq, x, np.searchsorted(seq, np.arange(count + 1))
+
+
+# --------------------------------------------------------------------------------------------
+# One-block sequences: in closed form
+# --------------------------------------------------------------------------------------------
+
+
+def _straight_plans(batch: _Batch) -> list[FeedPlan]:
+    """Plans of one-block sequences (the batch holds only those).
+
+    A block is a line in joint space, q(s) = q0 + s dq for s in [0, 1], and the tip's spline
+    through two points the chord: every cap is the same all along it. The time-optimal move
+    from rest to rest is then known exactly: the 7-segment S-curve in s (the trapezoid without
+    jerk limits) under the path speed of :meth:`_Batch.point_cap`, the path acceleration
+    ``min_j a_j / |dq_j|`` and the path jerk ``min_j J_j / |dq_j|``, at the limits themselves.
+    Its peaks are those limits, exactly (the peak ratios are computed, not sampled).
+    """
+    count = batch.count
+    lim = batch.limits
+    x, slope = batch.point_cap(np.arange(count), np.full(count, 0.5))  # slope (5, M): |dq| (s spans 1)
+    with np.errstate(divide="ignore"):
+        acc = np.min(lim.acceleration[:, None] / slope, axis=0)
+        jerk = np.min(lim.jerk[:, None] / slope, axis=0) if batch.jerk else np.full(count, np.inf)
+    top, peak_acc, tj, ta, tv = _rest_to_rest(np.sqrt(x), acc, jerk)
+    # Segments: jerk up, hold, jerk down, cruise, then the mirror; acceleration at each start.
+    durations = np.stack([tj, ta, tj, tv, tj, ta, tj], axis=1)
+    zero = np.zeros(count)
+    start_acc = np.stack([zero, peak_acc, peak_acc, zero, zero, -peak_acc, -peak_acc], axis=1)
+    j = np.where(np.isfinite(jerk), jerk, 0.0)
+    seg_jerk = np.stack([j, zero, -j, zero, -j, zero, j], axis=1)
+    start_v, start_s = np.zeros((count, 7)), np.zeros((count, 7))
+    for k in range(6):
+        d, a, jk = durations[:, k], start_acc[:, k], seg_jerk[:, k]
+        start_v[:, k + 1] = start_v[:, k] + a * d + jk * d ** 2 / 2.0
+        start_s[:, k + 1] = start_s[:, k] + start_v[:, k] * d + a * d ** 2 / 2.0 + jk * d ** 3 / 6.0
+    ratios = np.stack([top * slope / lim.velocity[:, None], peak_acc * slope / lim.acceleration[:, None],
+                       (jerk * slope / lim.jerk[:, None]) if batch.jerk else np.zeros_like(slope)], axis=1)
+    plans = []
+    for r in range(count):
+        keep = durations[r] > 0
+        breaks = np.r_[0.0, np.cumsum(durations[r, keep])]
+        coef = np.stack([seg_jerk[r, keep] / 6.0, start_acc[r, keep] / 2.0, start_v[r, keep], start_s[r, keep]])
+        w = slice(batch.wfirst[r], batch.wfirst[r + 1])
+        path = Cubics(batch.s[w].copy(), np.ascontiguousarray(batch.path.coef[..., r:r + 1].transpose(0, 2, 1)))
+        total = breaks[-1]
+        plans.append(FeedPlan(np.array([total]), np.array([0.0, total]), batch.s[w].copy(), path,
+                              Cubics(breaks, coef), float(tj[r]), 0, 0, ratios[:, :, r].T.copy()))
+    return plans
+
+
+def _rest_to_rest(speed: np.ndarray, acc: np.ndarray, jerk: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The time-optimal move over a distance of 1 from rest to rest under a speed (1/s), an
+    acceleration (1/s^2) and a jerk limit (1/s^3; inf: the trapezoid), per row: its peak speed,
+    its peak acceleration, and its jerk, constant-acceleration and cruise times (s).
+
+    A ramp from rest to v takes tj = sqrt(v / J) of jerk each way where v J <= A^2 (no
+    acceleration limit reached), else tj = A / J and A for v / A - A / J between; it covers
+    v (2 tj + ta) / 2. Two ramps to the speed limit that cover more than 1 give way to the
+    peak speed whose two ramps cover exactly 1 (the double S profile of Biagiotti & Melchiorri,
+    Trajectory Planning for Automatic Machines and Robots, 2008, sec. 3.4).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+
+        def ramp(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            full = v * jerk >= acc ** 2  # the acceleration limit is reached
+            tj = np.where(full, acc / jerk, np.sqrt(v / jerk))
+            return full, tj, np.where(full, v / acc - tj, 0.0)
+
+        _, tj, ta = ramp(speed)
+        short = speed * (2.0 * tj + ta) > 1.0
+        # no cruise: the peak from v^1.5 / sqrt(J) = 1 / 2, else from v^2 / A + v A / J = 1
+        free = (np.sqrt(jerk) / 2.0) ** (2.0 / 3.0)
+        b = acc ** 2 / jerk
+        capped = 2.0 * acc / (b + np.sqrt(b ** 2 + 4.0 * acc))  # v^2 + b v - A = 0, without cancellation
+        top = np.where(short, np.where(free * jerk <= acc ** 2, free, capped), speed)
+        full, tj, ta = ramp(top)
+        tv = np.where(short, 0.0, (1.0 - top * (2.0 * tj + ta)) / top)
+        peak_acc = np.where(full, acc, jerk * tj)
+    return top, peak_acc, np.where(np.isfinite(jerk), tj, 0.0), np.maximum(ta, 0.0), np.maximum(tv, 0.0)
 
 
 # --------------------------------------------------------------------------------------------

@@ -52,11 +52,11 @@ class SequenceError(Exception):
 
 
 #: Planning work, in blocks: a sequence counts as 32 more (its grid has about 32 intervals more
-#: than it has blocks: measured, 15 us per block and 490 us per one-block sequence). A helper
-#: process costs as much as 10,000 (it starts later, by a fork, and sends its plans back:
-#: ~0.2 s), so this process plans that much more than each helper, and work below two helpers'
-#: cost is planned here alone.
-_SEQUENCE_WORK, _PROCESS_WORK = 32, 10_000
+#: than it has blocks: measured, 15 us per block and 500 us per short sequence), a one-block
+#: sequence as 10 in all (planned in closed form: 170 us). A helper process costs as much as
+#: 10,000 (it starts later, by a fork, and sends its plans back: ~0.2 s), so this process plans
+#: that much more than each helper, and work below two helpers' cost is planned here alone.
+_SEQUENCE_WORK, _ONE_BLOCK_WORK, _PROCESS_WORK = 32, 10, 10_000
 
 
 def _split(items: list, work: np.ndarray, parts: int) -> list[list]:
@@ -116,7 +116,7 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     ranges = feed_sequences(joints, rapid, group, limits, corner)
     sequences = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in ranges]
     # Split by work, not by count: a row of 400 blocks and a one-block plunge are both a sequence.
-    work = np.array([b - a + 1 + _SEQUENCE_WORK for a, b in ranges])
+    work = np.array([_ONE_BLOCK_WORK if a == b else b - a + 1 + _SEQUENCE_WORK for a, b in ranges])
     parts = max(1, min(workers, int(work.sum()) // (2 * _PROCESS_WORK)))
     tasks = [(chunk, limits, rotary_feed, corner, jerk, engine) for chunk in _split(sequences, work, parts)]
     if len(tasks) > 1:  # this process plans the first share while the others are planned beside it
