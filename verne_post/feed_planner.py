@@ -163,7 +163,7 @@ class FeedPlan:
     waypoint_s: np.ndarray  # (K + 1,) path parameter of the waypoints, 0 .. 1
     path: Cubics  # q(s): (5,) mm/rad, a cubic per block
     profile: Cubics  # s(t)
-    filter_width: float  # s, width of the jerk filter (0 without jerk limiting)
+    filter_width: float  # s, width of the jerk filter (0 without jerk limiting; one block: its S-curve's jerk time)
     gridpoints: int  # TOPP2 gridpoints used
     refinements: int  # local cap reductions needed to meet every limit
     # (3, 5): largest |velocity|, |acceleration|, |jerk| of each joint over its limit, found by
