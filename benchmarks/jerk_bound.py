@@ -39,8 +39,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from benchmarks.scurve import ramp_time
-from verne_post.timing import TIP_EPS, Limits, block_min_time, checked_sequence
+from verne_post.timing import TIP_EPS, Limits, block_min_time, checked_sequence, rest_to_rest
 
 __all__ = ["jerk_lower_bounds", "rest_to_rest_time", "time_from_rest"]
 
@@ -69,24 +68,9 @@ def time_from_rest(distance: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.nda
 
 def rest_to_rest_time(distance: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Time (s) of the time-optimal move over ``distance`` from rest to rest with speed,
-    acceleration and jerk at most v, a, j (one axis): the 7-segment S-curve, in closed form.
-
-    A ramp from rest to a peak P takes ``2 sqrt(P / j)`` if ``P <= a^2 / j`` (the acceleration
-    never reaches a), else ``P / a + a / j``, over ``P / 2`` times that; the move ramps up and down
-    and cruises at v for what is left, or, if the two ramps to v do not fit, peaks where they
-    just do.
-    """
-    distance, v, a, j = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (distance, v, a, j)))
-
-    def ramp(peak: np.ndarray) -> np.ndarray:
-        return ramp_time(0.0, peak, a, j)
-
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cruise = 2.0 * ramp(v) + (distance - v * ramp(v)) / v
-        low_peak = np.cbrt(0.25 * distance * distance * j)  # P ramp(P) = 2 P^1.5 / sqrt(j) = D
-        high_peak = 0.5 * a * (np.sqrt((a / j) ** 2 + 4.0 * distance / a) - a / j)  # P^2 / a + P a / j = D
-    peak = np.where(low_peak * j <= a * a, low_peak, high_peak)
-    return np.where(distance >= v * ramp(v), cruise, 2.0 * ramp(peak))
+    acceleration and jerk at most v, a, j (one axis): the 7-segment S-curve
+    (:func:`verne_post.timing.rest_to_rest`), broadcast."""
+    return rest_to_rest(*np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (distance, v, a, j)))).total
 
 
 def _segment_scan(values: np.ndarray, seq: np.ndarray, op: np.ufunc) -> np.ndarray:

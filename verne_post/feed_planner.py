@@ -83,7 +83,7 @@ from typing import Literal
 
 import numpy as np
 
-from .timing import DOF, TIP_EPS, Limits, PlanningError, checked_sequence
+from .timing import DOF, TIP_EPS, Limits, PlanningError, checked_sequence, rest_to_rest
 from .topp import Engine, ToppError, solver
 
 __all__ = ["Cubics", "FeedPlan", "plan_feed", "plan_feeds"]
@@ -581,6 +581,12 @@ class _Batch:
                 x = np.minimum(x, np.min((_JERK_CAP_MARGIN * lim.jerk[:, None] / np.abs(q[1])) ** (2.0 / 3.0), axis=0))
         return np.minimum(np.minimum(x, np.minimum(self.block_cap[left], self.block_cap[right]) ** 2), 1e300), q1
 
+    def sequence_path(self, r: int) -> tuple[np.ndarray, Cubics]:
+        """Sequence r's waypoint parameters (K + 1,) and its spline q(s), standalone copies."""
+        w = slice(self.wfirst[r], self.wfirst[r + 1])
+        blocks = self.path.coef[..., self.bfirst[r]:self.bfirst[r + 1]]
+        return self.s[w].copy(), Cubics(self.s[w].copy(), np.ascontiguousarray(blocks.transpose(0, 2, 1)))
+
     def waypoint_at(self, seq: int, c: float) -> int:
         """Index (within its sequence) of the first waypoint at or after local path parameter c."""
         s = self.s[self.wfirst[seq]:self.wfirst[seq + 1]]
@@ -623,9 +629,10 @@ def _straight_plans(batch: _Batch) -> list[FeedPlan]:
     with np.errstate(divide="ignore"):
         acc = np.min(lim.acceleration[:, None] / slope, axis=0)
         jerk = np.min(lim.jerk[:, None] / slope, axis=0) if batch.jerk else np.full(count, np.inf)
-    top, peak_acc, tj, ta, tv = _rest_to_rest(np.sqrt(x), acc, jerk)
+    move = rest_to_rest(np.ones(count), np.sqrt(x), acc, jerk)
+    top, peak_acc, tj, ta = move.peak_speed, move.peak_acceleration, move.jerk_time, move.acceleration_time
     # Segments: jerk up, hold, jerk down, cruise, then the mirror; acceleration at each start.
-    durations = np.stack([tj, ta, tj, tv, tj, ta, tj], axis=1)
+    durations = np.stack([tj, ta, tj, move.cruise_time, tj, ta, tj], axis=1)
     zero = np.zeros(count)
     start_acc = np.stack([zero, peak_acc, peak_acc, zero, zero, -peak_acc, -peak_acc], axis=1)
     j = np.where(np.isfinite(jerk), jerk, 0.0)
@@ -642,44 +649,10 @@ def _straight_plans(batch: _Batch) -> list[FeedPlan]:
         keep = durations[r] > 0
         breaks = np.r_[0.0, np.cumsum(durations[r, keep])]
         coef = np.stack([seg_jerk[r, keep] / 6.0, start_acc[r, keep] / 2.0, start_v[r, keep], start_s[r, keep]])
-        w = slice(batch.wfirst[r], batch.wfirst[r + 1])
-        path = Cubics(batch.s[w].copy(), np.ascontiguousarray(batch.path.coef[..., r:r + 1].transpose(0, 2, 1)))
         total = breaks[-1]
-        plans.append(FeedPlan(np.array([total]), np.array([0.0, total]), batch.s[w].copy(), path,
-                              Cubics(breaks, coef), float(tj[r]), 0, 0, ratios[:, :, r].T.copy()))
+        plans.append(FeedPlan(np.array([total]), np.array([0.0, total]), *batch.sequence_path(r), Cubics(breaks, coef),
+                              float(tj[r]), 0, 0, ratios[:, :, r].T.copy()))
     return plans
-
-
-def _rest_to_rest(speed: np.ndarray, acc: np.ndarray, jerk: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The time-optimal move over a distance of 1 from rest to rest under a speed (1/s), an
-    acceleration (1/s^2) and a jerk limit (1/s^3; inf: the trapezoid), per row: its peak speed,
-    its peak acceleration, and its jerk, constant-acceleration and cruise times (s).
-
-    A ramp from rest to v takes tj = sqrt(v / J) of jerk each way where v J <= A^2 (no
-    acceleration limit reached), else tj = A / J and A for v / A - A / J between; it covers
-    v (2 tj + ta) / 2. Two ramps to the speed limit that cover more than 1 give way to the
-    peak speed whose two ramps cover exactly 1 (the double S profile of Biagiotti & Melchiorri,
-    Trajectory Planning for Automatic Machines and Robots, 2008, sec. 3.4).
-    """
-    with np.errstate(divide="ignore", invalid="ignore"):
-
-        def ramp(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            full = v * jerk >= acc ** 2  # the acceleration limit is reached
-            tj = np.where(full, acc / jerk, np.sqrt(v / jerk))
-            return full, tj, np.where(full, v / acc - tj, 0.0)
-
-        _, tj, ta = ramp(speed)
-        short = speed * (2.0 * tj + ta) > 1.0
-        # no cruise: the peak from v^1.5 / sqrt(J) = 1 / 2, else from v^2 / A + v A / J = 1
-        free = (np.sqrt(jerk) / 2.0) ** (2.0 / 3.0)
-        b = acc ** 2 / jerk
-        capped = 2.0 * acc / (b + np.sqrt(b ** 2 + 4.0 * acc))  # v^2 + b v - A = 0, without cancellation
-        top = np.where(short, np.where(free * jerk <= acc ** 2, free, capped), speed)
-        full, tj, ta = ramp(top)
-        tv = np.where(short, 0.0, (1.0 - top * (2.0 * tj + ta)) / top)
-        peak_acc = np.where(full, acc, jerk * tj)
-    return top, peak_acc, np.where(np.isfinite(jerk), tj, 0.0), np.maximum(ta, 0.0), np.maximum(tv, 0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1240,8 +1213,5 @@ class _Planner:
         block_times = times[0][times[1][k]:times[1][k + 1]].copy()
         b0, b1 = profiles.bfirst[k], profiles.bfirst[k + 1]
         profile = Cubics(profiles.breaks[b0:b1].copy(), np.ascontiguousarray(profiles.coef[:, b0 - k:b1 - k - 1]))
-        w = slice(batch.wfirst[r], batch.wfirst[r + 1])
-        blocks = batch.path.coef[..., batch.bfirst[r]:batch.bfirst[r + 1]]
-        path = Cubics(batch.s[w].copy(), np.ascontiguousarray(blocks.transpose(0, 2, 1)))
-        return FeedPlan(np.diff(block_times), block_times, batch.s[w].copy(), path, profile, float(self.w[r]),
+        return FeedPlan(np.diff(block_times), block_times, *batch.sequence_path(r), profile, float(self.w[r]),
                         int(self.grid.first[r + 1] - self.grid.first[r]), attempt, peaks)

@@ -23,7 +23,8 @@ from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
 
 from .errors import CheckError
 
-__all__ = ["Limits", "PlanningError", "RapidPlan", "baseline_time", "block_min_time", "lower_bound_time", "plan_rapid"]
+__all__ = ["DoubleS", "Limits", "PlanningError", "RapidPlan", "baseline_time", "block_min_time", "lower_bound_time",
+           "plan_rapid", "rest_to_rest"]
 
 DOF = 5
 TIP_EPS = 1e-4
@@ -134,6 +135,55 @@ def block_min_time(dq: np.ndarray, dtip: np.ndarray, feed: np.ndarray, limits: L
     relative to the part), feed (K,) mm/s; ``angular_feed`` (rad/s) as in :func:`lower_bound_time`."""
     return _block_min_time(_moves(np.asarray(dq, dtype=float), np.asarray(dtip, dtype=float)),
                            np.asarray(feed, dtype=float), _check_limits(limits), angular_feed)
+
+
+@dataclass(frozen=True)
+class DoubleS:
+    """The time-optimal rest-to-rest move of one axis (:func:`rest_to_rest`), per row: its peak
+    speed and acceleration, and the durations (s) of each of its four jerk phases, of each of
+    its two constant-acceleration phases and of its cruise."""
+
+    peak_speed: np.ndarray
+    peak_acceleration: np.ndarray
+    jerk_time: np.ndarray
+    acceleration_time: np.ndarray
+    cruise_time: np.ndarray
+
+    @property
+    def total(self) -> np.ndarray:
+        """Duration (s) of the whole move."""
+        return 4.0 * self.jerk_time + 2.0 * self.acceleration_time + self.cruise_time
+
+
+def rest_to_rest(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, jerk: np.ndarray) -> DoubleS:
+    """The time-optimal move over ``distance`` from rest to rest under a speed, an acceleration
+    and a jerk limit (jerk inf: the trapezoid), row by row (same-shape arrays, any unit of
+    length: the limits per s, s^2, s^3 of it).
+
+    A ramp from rest to v takes tj = sqrt(v / J) of jerk each way where v J <= A^2 (no
+    acceleration limit reached), else tj = A / J and A for v / A - A / J between; it covers
+    v (2 tj + ta) / 2. Two ramps to the speed limit that cover more than the distance D give way
+    to the peak speed whose two ramps cover exactly D (the double S profile of Biagiotti &
+    Melchiorri, Trajectory Planning for Automatic Machines and Robots, 2008, sec. 3.4).
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+
+        def ramp(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            full = v * jerk >= acc ** 2  # the acceleration limit is reached
+            tj = np.where(full, acc / jerk, np.sqrt(v / jerk))
+            return full, tj, np.where(full, v / acc - tj, 0.0)
+
+        _, tj, ta = ramp(speed)
+        short = speed * (2.0 * tj + ta) > distance
+        # no cruise: the peak from 2 v^1.5 / sqrt(J) = D, else from v^2 / A + v A / J = D
+        free = (distance * np.sqrt(jerk) / 2.0) ** (2.0 / 3.0)
+        b = acc ** 2 / jerk
+        capped = 2.0 * acc * distance / (b + np.sqrt(b ** 2 + 4.0 * acc * distance))  # without cancellation
+        top = np.where(short, np.where(free * jerk <= acc ** 2, free, capped), speed)
+        full, tj, ta = ramp(top)
+        tv = np.where(short, 0.0, (distance - top * (2.0 * tj + ta)) / top)
+        peak_acc = np.where(full, acc, jerk * tj)
+    return DoubleS(top, peak_acc, np.where(np.isfinite(jerk), tj, 0.0), np.maximum(ta, 0.0), np.maximum(tv, 0.0))
 
 
 def lower_bound_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, limits: Limits, *,
