@@ -68,6 +68,36 @@ def test_kinematics_commands_reject_non_finite(command: str, args: list[str], op
     _rejected(result.exit_code, result.stderr, option)
 
 
+@pytest.mark.parametrize("value", ["nan", "inf", "0", "-1"])
+@pytest.mark.parametrize(("command", "option"), [
+    ("verify", "--tol"), ("verify", "--axis-tol"), ("verify", "--arc-tol"), ("place", "--tol"),
+    ("place", "--axis-tol"), ("place", "--arc-tol"), ("place", "--tool-length"), ("toolpath", "--arc-tol"),
+])
+def test_the_other_commands_reject_the_same_values(tmp_path: Path, command: str, option: str, value: str) -> None:
+    """The checking commands take the tolerances as 'post' does (a NaN tolerance once made 'verify'
+    match every block end with every CL pose, until it ran out of memory)."""
+    if option == "--tool-length" and value == "0":
+        return  # a tool of length 0 is a gauge point: allowed
+    program, part = tmp_path / "p.nc", tmp_path / "part.cls"
+    program.write_text("%\nG21 G90\nG0 X600 Y600 Z600 A0 C0\nM2\n%\n")
+    part.write_text(HEADER + GOOD)
+    args = [str(program), "--against", str(part)] if command == "verify" else [str(part)]
+    result = CliRunner().invoke(main, [command, *args, option, value])
+    _rejected(result.exit_code, result.stderr, option)
+
+
+def test_a_program_header_without_a_usable_tolerance_is_refused(tmp_path: Path) -> None:
+    """A header tolerance of 0 (edited by hand) is a one-line error naming the program, not a
+    verification that can match nothing."""
+    program = tmp_path / "p.nc"
+    program.write_text("%\n(TOLERANCE 0 MM 0.05 DEG)\nG21 G90\nG0 X600 Y600 Z600 A0 C0\nM2\n%\n")
+    (tmp_path / "part.cls").write_text(HEADER + GOOD)
+    result = CliRunner().invoke(main, ["verify", str(program), "--against", str(tmp_path / "part.cls")])
+    assert result.exit_code == 2, result.stderr
+    assert str(program) in result.stderr and "tolerances must be positive" in result.stderr
+    assert len(result.stderr.splitlines()) == 1
+
+
 def test_the_quoted_value_is_short_and_one_line(tmp_path: Path) -> None:
     code, stderr = _run(tmp_path, "--tol", "1\n2" + "9" * 500)
     _rejected(code, stderr, "--tol")

@@ -345,17 +345,22 @@ def test_a_program_split_by_work_over_processes_is_planned_as_in_one(monkeypatch
 
 
 def test_batched_splines_are_scipys_not_a_knot_splines() -> None:
-    """The one tridiagonal solve for many sequences gives each scipy's CubicSpline (2 to 12 points)."""
+    """The one tridiagonal solve for many sequences (cyclic reduction, no pivoting) gives each
+    scipy's CubicSpline (LAPACK's banded solve with pivoting): 2 to 12 points, and up to 600 with
+    neighbouring intervals up to 1e4 apart in length."""
     rng = np.random.default_rng(7)
-    sizes = rng.integers(2, 13, size=300)
-    x = np.concatenate([np.sort(rng.uniform(0, 1, n)) + np.arange(n) * 1e-3 for n in sizes])
-    y = rng.normal(size=(len(x), 4))
-    first = np.r_[0, np.cumsum(sizes)]
-    coef = _not_a_knot(x, y, first)
-    for r, n in enumerate(sizes):
-        a = first[r]
-        reference = CubicSpline(x[a:a + n], y[a:a + n], axis=0, bc_type="not-a-knot")
-        np.testing.assert_allclose(coef[:, a - r:a - r + n - 1], reference.c, rtol=1e-7, atol=1e-7)
+    for sizes, spread in ((rng.integers(2, 13, size=300), 0.0), (rng.integers(2, 600, size=60), 4.0)):
+        x = np.concatenate([np.cumsum(rng.uniform(0.5, 1.5, n) * 10.0 ** rng.uniform(-spread, 0.0, n)) for n in sizes])
+        y = rng.normal(size=(len(x), 4))
+        first = np.r_[0, np.cumsum(sizes)]
+        coef = _not_a_knot(x, y, first)
+        for r, n in enumerate(sizes):
+            a = first[r]
+            reference = CubicSpline(x[a:a + n], y[a:a + n], axis=0, bc_type="not-a-knot")
+            # each term's reach over its interval, c_k h^(3 - k), in units of y
+            reach = np.diff(x[a:a + n])[None, :, None] ** np.arange(3, -1, -1)[:, None, None]
+            np.testing.assert_allclose(coef[:, a - r:a - r + n - 1] * reach, reference.c * reach, rtol=1e-11,
+                                       atol=1e-10 * np.max(np.abs(y)))
 
 
 def test_piece_search_is_the_exact_search_within_each_sequence() -> None:

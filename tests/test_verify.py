@@ -432,6 +432,27 @@ def test_tool_length_from_the_command_line_is_in_the_program(tmp_path: Path) -> 
     assert "(TOOL 0 LENGTH 50.0000 DELTA 545.8000)" in target.read_text().splitlines()
 
 
+def test_near_finds_every_pair_within_the_radius_in_each_coordinate() -> None:
+    """_near (a hashed grid) against every pair tested one by one: clusters, exact repeats, pairs
+    exactly the radius apart, points on the grid's cell sides, negative and large coordinates."""
+    from verne_post.verify import _CELL, _near
+
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        radius = 10.0 ** rng.uniform(-4, 0)
+        size = _CELL * radius
+        centres = rng.uniform(-1e3, 1e3, (int(rng.integers(1, 6)), 6))
+        points = centres[rng.integers(0, len(centres), 300)] + rng.normal(0, radius, (300, 6))
+        points[:20] = np.round(points[:20] / size) * size  # on cell sides
+        queries = np.concatenate([points[rng.integers(0, 300, 100)] + rng.normal(0, radius, (100, 6)),
+                                  points[:50] + radius * rng.choice([-1.0, 0.0, 1.0], (50, 6)),  # at the radius
+                                  points[:10]])  # repeats
+        pair = set(zip(*(a.tolist() for a in _near(queries, points, radius)), strict=True))
+        far = np.max(np.abs(queries[:, None, :] - points[None, :, :]), axis=2)
+        expected = set(zip(*(a.tolist() for a in np.nonzero(far <= radius)), strict=True))
+        assert expected <= pair, sorted(expected - pair)[:5]
+
+
 def test_cl_points_take_the_earliest_block_at_or_after_the_one_before() -> None:
     """_match against a brute-force reading of its rule on paths that pass points many times (more
     than the k-d tree's first candidates), with blocks missing and out of order: every CL pose takes

@@ -392,21 +392,25 @@ def _decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) 
     return function
 
 
+TIP_TOL = Number(1e-6, 10.0, " mm")  # --tol, --arc-tol
+AXIS_TOL = Number(1e-6, 10.0, " deg")  # --axis-tol
+WORK_OFFSET = Number(-1e4, 1e4, " mm")
+
 # The choices of the pipeline ('post', 'check' and 'batch'), around the --report option.
 _choices_before_report = [
     machine_option,
     click.option("--tool-length", type=TOOL_LENGTH, default=None,
                  help="Tool length in mm for tools whose length neither the CL file nor the machine gives."),
-    click.option("--work-offset", nargs=3, type=Number(-1e4, 1e4, " mm"), default=None,
+    click.option("--work-offset", nargs=3, type=WORK_OFFSET, default=None,
                  help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
                       "offset with the most room to every limit (see 'verne-post place')."),
     click.option("--auto-offset", is_flag=True, hidden=True),
     click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
-    click.option("--tol", type=Number(1e-6, 10.0, " mm"), default=0.005, show_default=True,
+    click.option("--tol", type=TIP_TOL, default=0.005, show_default=True,
                  help="Tool tip deviation allowed between blocks, mm."),
-    click.option("--axis-tol", type=Number(1e-6, 10.0, " deg"), default=0.05, show_default=True,
+    click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True,
                  help="Tool axis deviation allowed between blocks, degrees."),
-    click.option("--arc-tol", type=Number(1e-6, 10.0, " mm"), default=0.001, show_default=True,
+    click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
                  help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
     *_reader_options,
 ]
@@ -662,7 +666,7 @@ def batch_command(inputs: tuple[str, ...], output_dir: str, jobs: int | None, sc
 @click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
 @click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
-@click.option("--arc-tol", type=float, default=0.001, show_default=True,
+@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
               help="Chordal deviation of arcs and splines expanded into points, mm.")
 @click.option("--quiet", "-q", is_flag=True, help="No dialect line and no warnings on stderr.")
 @_reader_option_group
@@ -679,8 +683,6 @@ def toolpath_command(cl_file: str, output: str | None, units: str | None, arc_to
     from .cl import read_toolpath
     from .toolpath import MOTION_KINDS
 
-    if not (np.isfinite(arc_tol) and arc_tol > 0):
-        raise InputError("--arc-tol must be a positive number of mm")
     tp = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame)
     if not quiet:
         click.echo(f"verne-post: {cl_file}: {tp.dialect}; {len(tp)} poses, source units {tp.units}", err=True)
@@ -711,14 +713,14 @@ def _print_findings(verification: Verification, max_messages: int) -> None:
 @click.option("--against", "cl_file", type=click.Path(dir_okay=False),
               help="The CL file (APT/CLSF, or a CSV of poses) the program must follow.")
 @machine_option
-@click.option("--work-offset", nargs=3, type=float, default=None,
+@click.option("--work-offset", nargs=3, type=WORK_OFFSET, default=None,
               help="Part zero X Y Z in the table frame, mm (default: the program header's, else the machine's).")
 @click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
-@click.option("--tol", type=float, default=None,
+@click.option("--tol", type=TIP_TOL, default=None,
               help="Tool tip deviation allowed, mm (default: the program header's, else 0.005).")
-@click.option("--axis-tol", type=float, default=None,
+@click.option("--axis-tol", type=AXIS_TOL, default=None,
               help="Tool axis deviation allowed, degrees (default: the program header's, else 0.05).")
-@click.option("--arc-tol", type=float, default=0.001, show_default=True,
+@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
               help="Chordal deviation of CIRCLE arcs expanded into CL points, mm.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the findings as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="Nothing on stderr but the findings.")
@@ -735,8 +737,6 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     from .tables import write_json
     from .verify import verify_program
 
-    if min(v for v in (tol, axis_tol, arc_tol) if v is not None) <= 0:
-        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     machine = load_machine(machine_path)
     try:
         text = Path(program).read_text(encoding="utf-8", errors="replace")
@@ -763,12 +763,12 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
 @main.command("place")
 @click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False))
 @machine_option
-@click.option("--tool-length", type=float, default=None,
+@click.option("--tool-length", type=TOOL_LENGTH, default=None,
               help="Tool length in mm for tools whose length neither the CL file nor the machine gives.")
 @click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
-@click.option("--tol", type=float, default=0.005, show_default=True, help="As for 'post': tip deviation, mm.")
-@click.option("--axis-tol", type=float, default=0.05, show_default=True, help="As for 'post': axis deviation, deg.")
-@click.option("--arc-tol", type=float, default=0.001, show_default=True, help="As for 'post': arc chords, mm.")
+@click.option("--tol", type=TIP_TOL, default=0.005, show_default=True, help="As for 'post': tip deviation, mm.")
+@click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True, help="As for 'post': axis deviation, deg.")
+@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True, help="As for 'post': arc chords, mm.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the placement as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @user_errors
@@ -786,8 +786,6 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     from .poses import machine_poses
     from .tables import write_json
 
-    if min(tol, axis_tol, arc_tol) <= 0:
-        raise InputError("--tol, --axis-tol and --arc-tol must be positive")
     machine = load_machine(machine_path)
     options = PostOptions(tool_length=tool_length, units=units, tol=tol, axis_tol=axis_tol, arc_tol=arc_tol, plan=False)
     toolpath = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol)
@@ -825,7 +823,7 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
               help="Height of the plan view, mm, table frame (default: where the x-z section is widest).")
 @click.option("--step", type=float, default=10.0, show_default=True, help="Grid spacing, mm.")
 @click.option("--program", type=click.Path(dir_okay=False), help="Overlay this CL file's tool tips.")
-@click.option("--work-offset", nargs=3, type=float, default=None,
+@click.option("--work-offset", nargs=3, type=WORK_OFFSET, default=None,
               help="Work offset of --program, mm (default: the machine file's).")
 @user_errors
 def workspace_command(output: str, machine_path: str | None, tool_length: float, tilt: float, rotary: float,

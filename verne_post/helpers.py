@@ -4,14 +4,12 @@ meanwhile solves, checks and writes the next part.
 
 A helper is a forked process that runs what it is handed in the order it was handed (a process
 pool of one worker), so the verifier keeps where its reading of the program stands from one part
-to the next. Each helper imports what only it needs (scipy, ~0.3 s a module) as it starts, while
-the main process is still reading the CL file. The results are the bits the main process would
-have computed: the same code on the same numbers (tests/test_helpers.py).
+to the next. The results are the bits the main process would have computed: the same code on
+the same numbers (tests/test_helpers.py).
 """
 
 from __future__ import annotations
 
-import importlib
 import multiprocessing
 import signal
 import time
@@ -27,11 +25,9 @@ from .verify import Reference, Verification, Verifier
 T = TypeVar("T")
 
 
-def _start(modules: tuple[str, ...], then: Callable[..., None] | None, args: tuple) -> None:
+def _start(then: Callable[..., None] | None, args: tuple) -> None:
     # Ctrl-C is the main process's to handle (it stops the helpers): no traceback from a helper.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    for name in modules:
-        importlib.import_module(name)
     if then is not None:
         then(*args)
 
@@ -56,17 +52,16 @@ def _died() -> HelperError:
 
 
 def _started() -> None:
-    """Nothing: the first call a helper gets, so that it starts (and imports) at once."""
+    """Nothing: the first call a helper gets, so that it starts at once."""
 
 
 class Helper:
-    """A forked process that runs the calls handed to it in turn; ``imports`` are imported, then
-    ``initializer(*initargs)`` is called, as it starts (with fork nothing is pickled for that)."""
+    """A forked process that runs the calls handed to it in turn; ``initializer(*initargs)`` is
+    called as it starts (with fork nothing is pickled for that)."""
 
-    def __init__(self, imports: tuple[str, ...] = (), initializer: Callable[..., None] | None = None,
-                 initargs: tuple = ()) -> None:
+    def __init__(self, initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> None:
         self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
-                                         initializer=_start, initargs=(imports, initializer, initargs))
+                                         initializer=_start, initargs=(initializer, initargs))
         self._pool.submit(_started)
 
     def submit(self, function: Callable[..., T], *args: Any) -> Future[T]:
@@ -117,7 +112,7 @@ class VerifierProcess:
     what a reading raised)."""
 
     def __init__(self, machine: Machine) -> None:
-        self._helper = Helper(("scipy.spatial",), _keep, (machine,))
+        self._helper = Helper(_keep, (machine,))
         self._started: Future[None] | None = None
         self._reads: list[Future[float]] = []
         self.seconds = 0.0  # spent verifying, once :meth:`result` has been called

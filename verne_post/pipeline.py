@@ -649,10 +649,10 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     helpers' (overlapping the others), ``waiting`` the main process's wait for them.
     """
     verify = verify and output is not None
-    with contextlib.ExitStack() as helpers:  # started first: they import scipy while the CL file is read
+    with contextlib.ExitStack() as helpers:
         planner: Planner = plan_timing
         if available(options.workers) and options.plan:
-            planning = Helper(("scipy.linalg",))
+            planning = Helper()
             helpers.callback(planning.close)
             planner = partial(_plan_in, planning)
         verifying = None
