@@ -674,7 +674,10 @@ def _match(reference: Reference, ends: _Poses, known: np.ndarray, tol: float, ax
     return matched
 
 
-_CELL = 8.0  # cells of the search grid, in units of the search radius (see _near)
+# Cells of the search grid, in search radii (see _near): wider cells, fewer neighbours to look in,
+# more candidates in each (on the 105k job 8: 184 ms, 32: 96 ms, 64: 82 ms with 20 % more pairs;
+# scipy's k-d tree took 120 ms).
+_CELL = 32.0
 # odd 64-bit multipliers (SplitMix64's constants): a cell's key is the sum of its six coordinates times them
 _MIX = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB, 0xD6E8FEB86659FD93,
                  0xA0761D6478BD642F, 0xE7037ED1A0B428DB], dtype=np.uint64)
@@ -686,7 +689,7 @@ def _near(queries: np.ndarray, points: np.ndarray, radius: float) -> tuple[np.nd
 
     A grid of cells ``_CELL`` radii wide, each cell a 64-bit key (two cells sharing one only
     add candidates): a query looks in its own cell and, along each coordinate where it lies
-    within the radius of its cell's side, the neighbour there (on average 1.25^6 = 3.8 cells).
+    within the radius of its cell's side, the neighbour there (on average 1.06^6 = 1.4 cells).
     numpy only: a k-d tree (scipy.spatial) cost the verifying process 0.45 s to import.
     """
     size = _CELL * radius
@@ -707,6 +710,8 @@ def _near(queries: np.ndarray, points: np.ndarray, radius: float) -> tuple[np.nd
         looking.append(who)
         looked.append(keys(cell[who] + side[who] * (bits >> np.arange(queries.shape[1]) & 1)))
     who, key = np.concatenate(looking), np.concatenate(looked)
+    ascending = np.argsort(key)  # a search of sorted keys runs in cache, 3x faster than of these
+    who, key = who[ascending], key[ascending]
     lo, hi = np.searchsorted(sorted_keys, key, "left"), np.searchsorted(sorted_keys, key, "right")
     count = hi - lo
     at = np.repeat(lo - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
