@@ -70,14 +70,15 @@ def test_kinematics_commands_reject_non_finite(command: str, args: list[str], op
 
 @pytest.mark.parametrize("value", ["nan", "inf", "0", "-1"])
 @pytest.mark.parametrize(("command", "option"), [
-    ("verify", "--tol"), ("verify", "--axis-tol"), ("verify", "--arc-tol"), ("place", "--tol"),
+    ("verify", "--tol"), ("verify", "--axis-tol"), ("verify", "--arc-tol"), ("verify", "--max-messages"),
+    ("place", "--tol"),
     ("place", "--axis-tol"), ("place", "--arc-tol"), ("place", "--tool-length"), ("toolpath", "--arc-tol"),
 ])
 def test_the_other_commands_reject_the_same_values(tmp_path: Path, command: str, option: str, value: str) -> None:
     """The checking commands take the tolerances as 'post' does (a NaN tolerance once made 'verify'
     match every block end with every CL pose, until it ran out of memory)."""
-    if option == "--tool-length" and value == "0":
-        return  # a tool of length 0 is a gauge point: allowed
+    if option in ("--tool-length", "--max-messages") and value == "0":
+        return  # a tool of length 0 is a gauge point, no message at all a choice: allowed
     program, part = tmp_path / "p.nc", tmp_path / "part.cls"
     program.write_text("%\nG21 G90\nG0 X600 Y600 Z600 A0 C0\nM2\n%\n")
     part.write_text(HEADER + GOOD)
@@ -96,6 +97,16 @@ def test_a_program_header_without_a_usable_tolerance_is_refused(tmp_path: Path) 
     assert result.exit_code == 2, result.stderr
     assert str(program) in result.stderr and "tolerances must be positive" in result.stderr
     assert len(result.stderr.splitlines()) == 1
+
+
+@pytest.mark.parametrize(("option", "value"), [
+    ("--step", "nan"), ("--step", "0"), ("--step", "1e-9"),  # 1e-9 mm once asked for 16 TiB
+    ("--tilt", "nan"), ("--tilt", "200"), ("--rotary", "inf"), ("--z", "nan"), ("--z", "1e5"),
+])
+def test_the_workspace_map_rejects_values_it_cannot_draw(tmp_path: Path, option: str, value: str) -> None:
+    result = CliRunner().invoke(main, ["workspace", "-o", str(tmp_path / "ws.png"), option, value])
+    _rejected(result.exit_code, result.stderr, option)
+    assert not (tmp_path / "ws.png").exists()
 
 
 def test_the_quoted_value_is_short_and_one_line(tmp_path: Path) -> None:
