@@ -131,6 +131,10 @@ MIN_PERIOD = 1e-4
 #: Magnitudes beyond any machine: coordinates (mm) and joint values (mm, degrees or radians).
 COORDINATE = Number(-1e6, 1e6)
 TOOL_LENGTH = Number(0.0, MAX_TOOL_LENGTH, " mm")
+TIP_TOL = Number(1e-6, 10.0, " mm")  # --tol, --arc-tol
+AXIS_TOL = Number(1e-6, 10.0, " deg")  # --axis-tol
+WORK_OFFSET = Number(-1e4, 1e4, " mm")
+MAX_MESSAGES = Number(0, 10**6, integer=True)
 
 machine_option = click.option("--machine", "machine_path", type=click.Path(dir_okay=False),
                               help="Machine YAML file (default: the shipped VERNE).")
@@ -392,11 +396,6 @@ def _decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) 
         function = option(function)
     return function
 
-
-TIP_TOL = Number(1e-6, 10.0, " mm")  # --tol, --arc-tol
-AXIS_TOL = Number(1e-6, 10.0, " deg")  # --axis-tol
-WORK_OFFSET = Number(-1e4, 1e4, " mm")
-MAX_MESSAGES = Number(0, 10**6, integer=True)
 
 # The choices of the pipeline ('post', 'check' and 'batch'), around the --report option.
 _choices_before_report = [
