@@ -706,9 +706,9 @@ def _near(queries: np.ndarray, points: np.ndarray, radius: float) -> tuple[np.nd
     needs = (side != 0.0) @ (1 << np.arange(queries.shape[1]))  # per query, the coordinates with a neighbour
     looking, looked = [], []
     for bits in range(1 << queries.shape[1]):  # each set of those coordinates
-        who = np.flatnonzero(needs & bits == bits)
+        who = np.flatnonzero((needs & bits) == bits)
         looking.append(who)
-        looked.append(keys(cell[who] + side[who] * (bits >> np.arange(queries.shape[1]) & 1)))
+        looked.append(keys(cell[who] + side[who] * ((bits >> np.arange(queries.shape[1])) & 1)))
     who, key = np.concatenate(looking), np.concatenate(looked)
     ascending = np.argsort(key)  # a search of sorted keys runs in cache, 3x faster than of these
     who, key = who[ascending], key[ascending]
