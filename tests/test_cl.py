@@ -654,6 +654,96 @@ def test_godlta_and_tlaxis(tmp_path: Path) -> None:
     np.testing.assert_allclose(tp.axis, [[1, 0, 0]] * 3)
 
 
+# --------------------------------------------------------------------------- CLEARP / CLRSRF / RETRCT
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def test_retrct_withdraws_along_the_tool_axis_onto_the_clearance_plane(tmp_path: Path) -> None:
+    # ICAM's APT vocabulary: RETRCT moves the tip along the current tool axis until it rests on the
+    # plane of the last CLEARP / CLRSRF. Checked as a property of each result, not by the formula:
+    # on the plane, along +axis from the point before, a rapid, carrying the RETRCT's line.
+    rng = np.random.default_rng(7)
+    lines, cases = MM.rstrip("\n").split("\n"), []
+    for k in range(300):
+        tip = rng.uniform(-200, 200, 3)
+        axis = _unit(rng.normal(size=3) + np.array([0, 0, 2.0]))
+        normal = _unit(rng.normal(size=3))
+        if abs(normal @ axis) < 0.2:
+            normal = _unit(normal + 2 * axis)
+        if normal @ axis < 0:
+            normal = -normal
+        distance = normal @ tip + rng.uniform(0.5, 150) * (normal @ axis)
+        scale = rng.uniform(0.2, 5)  # CLEARP's a,b,c need not be unit: the plane is a·x = d
+        a, b, c, d = (*(scale * normal), scale * distance)
+        form = ("CLEARP/{:.12f},{:.12f},{:.12f},{:.12f}", "CLRSRF/{:.12f},{:.12f},{:.12f},{:.12f}",
+                "CLRSRF/NORMAL,{:.12f},{:.12f},{:.12f},{:.12f}")[k % 3]
+        lines += [f"GOTO/{tip[0]:.12f},{tip[1]:.12f},{tip[2]:.12f},{axis[0]:.15f},{axis[1]:.15f},{axis[2]:.15f}",
+                  form.format(a, b, c, d), "RETRCT"]
+        cases.append((tip, axis, normal, distance, len(lines)))
+    tp = cl(tmp_path, "\n".join(lines) + "\n")
+    assert len(tp) == 2 * len(cases) and tp.warnings == ()
+    for n, (tip, axis, normal, distance, line) in enumerate(cases):
+        before, after = tp.tip[2 * n], tp.tip[2 * n + 1]
+        np.testing.assert_allclose(before, tip, atol=1e-9)
+        assert abs(normal @ after - distance) < 1e-8
+        move = after - before
+        assert move @ axis > 0.4 and np.linalg.norm(np.cross(move, axis)) < 1e-8
+        assert tp.rapid[2 * n + 1] and not tp.rapid[2 * n] and tp.line[2 * n + 1] == line
+        np.testing.assert_allclose(tp.axis[2 * n + 1], axis, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("record", "end"),
+    [
+        ("CLEARP/50", [10 + 0.6 * 62.5, 0, 50]),  # the plane z = 50, reached along (0.6, 0, 0.8)
+        ("CLEARP/XYPLAN,50", [10 + 0.6 * 62.5, 0, 50]),
+        ("CLEARP/YZPLAN,40", [40, 0, 0.8 * 50]),  # x = 40
+        ("CLEARP/ZXPLAN,-5", None),  # y = -5: parallel to the axis
+        ("CLRSRF/0,0,100", [10 + 0.6 * 74, 0, 0.8 * 74]),  # through the point, normal to the axis
+    ],
+)
+def test_clearance_plane_forms(tmp_path: Path, record: str, end: list[float] | None) -> None:
+    text = MM + f"GOTO/10,0,0,0.6,0,0.8\n{record}\nRETRCT\n"
+    if end is None:
+        e = err(tmp_path, text)
+        assert e.line == 5 and "parallel to the clearance plane of line 4" in e.reason
+        return
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip[-1], end, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("records", "message", "line"),
+    [
+        ("RETRCT", "RETRCT without a clearance plane", 4),
+        ("CLEARP/XYPLAN,50\nCLEARP/NOMORE\nRETRCT", "RETRCT without a clearance plane", 6),
+        ("CLRSRF/0,0,0,0,0,1,20\nRETRCT", "clearance surface of line 4, a form not supported", 5),
+        ("CLRSRF/NORMAL,10\nRETRCT", "clearance surface of line 4, a form not supported", 5),
+        ("CLEARP/0,0,0,5\nRETRCT", "normal has zero length", 4),
+    ],
+)
+def test_retrct_that_cannot_be_honoured_is_refused(tmp_path: Path, records: str, message: str, line: int) -> None:
+    # a skipped retract leaves the next move to run from the cut through the part
+    e = err(tmp_path, MM + "GOTO/0,0,0\n" + records + "\nGOTO/50,0,50\n")
+    assert message in e.reason and e.line == line
+
+
+def test_retrct_from_above_the_plane_does_not_move_down(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "GOTO/0,0,80\nCLEARP/XYPLAN,50\nRETRCT\nGOTO/5,0,80\n")
+    np.testing.assert_allclose(tp.tip, [[0, 0, 80], [5, 0, 80]])
+    assert any(":5: RETRCT: the tool is already at or beyond the clearance plane of line 4" in w for w in tp.warnings)
+
+
+def test_clearance_plane_stays_where_it_was_defined_when_the_frame_changes(tmp_path: Path) -> None:
+    # the plane is the part's z = 50; the GOTO is in an MCS shifted by (0, 0, 30) and rotated about Z
+    text = MM + "CLEARP/XYPLAN,50\nMSYS/0,0,30,0,1,0,-1,0,0\nGOTO/1,2,3\nRETRCT\n"
+    tp = cl(tmp_path, text, frame="apply")
+    np.testing.assert_allclose(tp.tip, [[-2, 1, 33], [-2, 1, 50]], atol=1e-12)
+
+
 # --------------------------------------------------------------------------- text records, ignored records
 
 

@@ -1,4 +1,4 @@
-"""Motion records: GOTO, FROM, GOHOME, GODLTA, RAPID, MULTAX, TLAXIS (positions in file units, CL frame).
+"""Motion records: GOTO, FROM, GOHOME, GODLTA, RETRCT, RAPID, MULTAX, TLAXIS (positions in file units, CL frame).
 
 ``GOTO/x,y,z[,i,j,k]``: 3 numbers carry the last tool axis (initially (0,0,1)); any other count is
 an error because no CAM format we know defines it. ``FROM`` is the tool's starting position,
@@ -7,6 +7,16 @@ FF CAM writes it there) it only sets the start, since no tool length could place
 ``GODLTA/d`` moves along the tool axis, ``GODLTA/dx,dy,dz`` by a vector; ``RAPID``
 makes the next motion a rapid; ``MULTAX/OFF`` resets the axis to (0,0,1) and forbids 6-number
 GOTOs; ``TLAXIS/i,j,k`` sets the carried axis.
+
+``RETRCT`` withdraws the tool along its axis, at rapid, until the tip is on the clearance surface
+of the last ``CLEARP`` or ``CLRSRF`` (ICAM's APT vocabulary, "The RETRCT / CLEARP / CLRSRF
+Command"): ``CLEARP/d`` (the plane z = d), ``CLEARP/XYPLAN|YZPLAN|ZXPLAN,d``, ``CLEARP/a,b,c,d`` and
+``CLRSRF/a,b,c,d`` (the plane a·x + b·y + c·z = d), ``CLRSRF/[NORMAL,]i,j,k,d`` (NCL's form of the
+same plane), ``CLRSRF/x,y,z`` (the plane through the point normal to the tool axis at the
+retract); ``NOMORE`` removes it. Until a RETRCT comes these records change nothing, so any other
+form (a cylinder, NCL's AVOID or TOOL) is read silently; a RETRCT onto one is refused rather than
+skipped, because the move after a skipped retract may run through the part. A tool already at or
+beyond the surface along its axis is not moved (ICAM ignores that RETRCT too), with a warning.
 """
 
 from __future__ import annotations
@@ -15,7 +25,7 @@ import numpy as np
 
 from . import curves, cycle_records
 from .lexer import Record
-from .state import ReaderState
+from .state import Clearance, ReaderState
 
 Axis = tuple[float, float, float]
 
@@ -91,6 +101,67 @@ def godlta(st: ReaderState, rec: Record) -> None:
     motion_to(st, [float(v) for v in q], st.axis, rec.line)
 
 
+_PLANE_WORDS = {"XYPLAN": (0.0, 0.0, 1.0), "YZPLAN": (1.0, 0.0, 0.0), "ZXPLAN": (0.0, 1.0, 0.0)}
+
+
+def clearance(st: ReaderState, rec: Record) -> None:
+    """CLEARP / CLRSRF: remember the clearance surface for RETRCT (file units, the current CL frame)."""
+    toks = st.tokens(rec.args, rec.word, rec.line)
+    numbers = [t for t in toks if isinstance(t, float)]
+    words = [t for t in toks if isinstance(t, str)]
+    st.coordinate(numbers, rec.word, rec.line)
+    normal: tuple[float, ...] | None = None
+    if words == ["NOMORE"] and not numbers:
+        st.clearance = None
+        return
+    if not words and len(numbers) == 3 and rec.word == "CLRSRF":
+        st.clearance = Clearance(rec.line, st.frame_id, point=np.array(numbers))
+        return
+    if not words and len(numbers) == 1 and rec.word == "CLEARP":
+        normal, distance = (0.0, 0.0, 1.0), numbers[0]
+    elif len(words) == 1 and words[0] in _PLANE_WORDS and len(numbers) == 1 and toks[0] == words[0]:
+        normal, distance = _PLANE_WORDS[words[0]], numbers[0]
+    elif len(numbers) == 4 and (not words or (words == ["NORMAL"] and toks[0] == "NORMAL")):
+        normal, distance = tuple(numbers[:3]), numbers[3]
+    if normal is None:
+        st.clearance = Clearance(rec.line, st.frame_id)  # a form RETRCT cannot use
+        return
+    length = float(np.linalg.norm(normal))
+    if length < 1e-9:
+        raise st.fail(f"{rec.word}: the plane's normal has zero length", rec.line)
+    st.clearance = Clearance(rec.line, st.frame_id, normal=np.array(normal) / length, distance=distance / length)
+
+
+def retrct(st: ReaderState, rec: Record) -> None:
+    curves.no_pending_curve(st, "RETRCT", rec.line)
+    if st.cycle is not None:
+        raise st.fail("RETRCT inside a drilling CYCLE is not supported", rec.line)
+    surface = st.clearance
+    if surface is None:
+        raise st.fail("RETRCT without a clearance plane (no CLEARP or CLRSRF before it)", rec.line)
+    p, a = st.current_pose("RETRCT", rec.line)
+    if surface.point is not None:
+        normal, distance = a, float(a @ st.from_part(*st.to_part(surface.point, a, surface.frame))[0])
+    elif surface.normal is not None:
+        origin, normal = st.from_part(*st.to_part(surface.distance * surface.normal, surface.normal, surface.frame))
+        distance = float(normal @ origin)
+    else:
+        raise st.fail(f"RETRCT onto the clearance surface of line {surface.line}, a form not supported here "
+                      "(a plane or a point is): give the retract as a GOTO", rec.line)
+    along = float(normal @ a)
+    if abs(along) < 1e-6:
+        raise st.fail(f"RETRCT: the tool axis is parallel to the clearance plane of line {surface.line}, "
+                      "so no retract along it reaches the plane", rec.line)
+    travel = (distance - float(normal @ p)) / along
+    if travel <= 0.0:
+        st.warn(rec.line, f"RETRCT: the tool is already at or beyond the clearance plane of line {surface.line} "
+                "along its axis; no move", kind="RETRCT beyond")
+        st.take_rapid()
+        return
+    st.take_rapid()
+    st.add_pose([float(v) for v in p + travel * a], st.axis, rec.line, rapid=True)
+
+
 def rapid(st: ReaderState, rec: Record) -> None:
     if rec.args.strip():
         st.warn(rec.line, f"RAPID/{rec.args.strip()[:40]}: arguments ignored", kind="RAPID args")
@@ -118,5 +189,5 @@ def multax(st: ReaderState, rec: Record) -> None:
 
 HANDLERS = {
     "GOTO": goto, "FROM": from_, "GOHOME": gohome, "GODLTA": godlta, "RAPID": rapid, "TLAXIS": tlaxis,
-    "MULTAX": multax,
+    "MULTAX": multax, "RETRCT": retrct, "CLEARP": clearance, "CLRSRF": clearance,
 }  # fmt: skip

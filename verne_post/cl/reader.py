@@ -73,8 +73,8 @@ HANDLERS: dict[str, Handler] = {
 # flute/extension lengths for its own simulation), SETUP/START|END; Makino: SET/MODE,ABSOL
 # (absolute data, the only kind there is here); HSM: MODE, HEAD, AUXFUN (machine-specific codes).
 _IGNORED = frozenset({
-    "PAINT", "DISPLY", "PEN", "AUTOPS", "CLRSRF", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
-    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "CLEARP", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
+    "PAINT", "DISPLY", "PEN", "AUTOPS", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
+    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
     "HEAD", "AUXFUN", "OPSKIP",
 })  # fmt: skip
 _IGNORED_PREFIXES = ("CSI_SET_",)

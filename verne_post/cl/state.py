@@ -100,6 +100,19 @@ class PoseRows:
 
 
 @dataclass
+class Clearance:
+    """The clearance surface of a CLEARP / CLRSRF record (file units, in the CL frame ``frame``): the
+    plane normal · x = distance, or the plane through ``point`` normal to the tool axis at the
+    retract, or neither (a form the reader does not use)."""
+
+    line: int
+    frame: int
+    normal: np.ndarray | None = None
+    distance: float = 0.0
+    point: np.ndarray | None = None
+
+
+@dataclass
 class Arc:
     """An arc's record for the direction check: pose indices and its centre and unit axis (file units)."""
 
@@ -151,6 +164,7 @@ class ReaderState:
         self.curve: Any = None  # a CIRCLE/MOVARC waiting for its end GOTO, or a NURBS being read
         self.skip_goto: np.ndarray | None = None  # a GOTO repeating this point (a spline's end) adds nothing
         self.home: tuple[int, np.ndarray, np.ndarray] | None = None  # FROM pose: (frame id, tip, axis) in it
+        self.clearance: Clearance | None = None  # the surface RETRCT withdraws to
         self.part_name: str | None = None
         self.units_seen: tuple[Units, int] | None = None
         self.cutcom_warned = False
