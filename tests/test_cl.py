@@ -776,9 +776,17 @@ def test_unknown_record_warning(tmp_path: Path) -> None:
     assert tp.warnings == (f"{path}:4: unknown record 'FOOBAR' ignored", f"{path}:5: unknown record 'WIDGET' ignored")
 
 
+def test_tracut_is_read_as_information_with_a_warning(tmp_path: Path) -> None:
+    tp = cl(tmp_path, MM + "TRACUT/1,0,0,5,0,1,0,0,0,0,1,0\nGOTO/1,2,3\nTRACUT/NOMORE\nGOTO/0,0,0\n")
+    np.testing.assert_allclose(tp.tip, [[1, 2, 3], [0, 0, 0]])
+    assert len(tp.warnings) == 1 and ":3: TRACUT read as information" in tp.warnings[0]
+    assert "(2 records like this" in tp.warnings[0]
+
+
 @pytest.mark.parametrize(
     ("record", "message"),
-    [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("INDEX/1", "INDEX")],
+    [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("INDEX/1", "INDEX"), ("MOVE/1,2,3", "MOVE"),
+     ("CONT/1,2,3", "CONT")],
 )
 def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
     e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")

@@ -89,6 +89,15 @@ _REJECTED = {
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
     **{w: f"motion record {w} is not supported: the CL file must contain explicit GOTO points"
        for w in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN", "GO")},
+    # ICAM's table of CL commands gives CONT and MOVE the class of GOTO (5000): motion that must
+    # not be dropped, in forms whose details it does not document
+    **{w: f"motion record {w} is not supported: write the motion as GOTO records" for w in ("CONT", "MOVE")},
+}  # fmt: skip
+# Read as information, with a warning: ICAM's documentation of TRACUT says most CAM systems pass it,
+# if at all, as the transformation already applied to the data that follow.
+_INFORMATIONAL = {
+    "TRACUT": "TRACUT read as information: the CL data after it are taken as already transformed, as "
+              "ICAM documents most CAM systems writing it; check the part's position",
 }  # fmt: skip
 
 
@@ -165,6 +174,8 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
         raise st.fail("continuation '$' at end of file: the record is incomplete", rec.line)
     elif rec.word in _REJECTED:
         raise st.fail(_REJECTED[rec.word], rec.line)
+    elif rec.word in _INFORMATIONAL:
+        st.warn(rec.line, _INFORMATIONAL[rec.word], kind=rec.word)
     elif rec.word not in _IGNORED and not rec.word.startswith(_IGNORED_PREFIXES):
         shown = rec.word if len(rec.word) <= 40 else rec.word[:37] + "..."
         st.warn(rec.line, f"unknown record '{shown}' ignored", kind=f"unknown {shown}")
