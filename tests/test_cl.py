@@ -313,9 +313,35 @@ def test_bad_units_argument(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- MULTAX
 
 
-def test_multax_on_off(tmp_path: Path) -> None:
-    tp = cl(tmp_path, MM + "MULTAX/ON\nGOTO/0,0,0,1,0,0\nGOTO/1,0,0\nMULTAX/OFF\nGOTO/2,0,0\n")
-    np.testing.assert_allclose(tp.axis, [[1, 0, 0], [1, 0, 0], [0, 0, 1]])
+TILTED = "MULTAX/ON\nGOTO/0,0,0,0.6,0,0.8\nGOTO/1,0,0\nMULTAX/OFF\nGOTO/2,0,0\n"
+
+
+def test_multax_off_keeps_the_last_axis_in_catia_apt(tmp_path: Path) -> None:
+    # CATIA / DELMIA "APT Format: Syntax of APT Instructions": after MULTAX/OFF "the components of
+    # the locked tool axis are the components defined on the last 5-axis position"
+    tp = cl(tmp_path, "$$*CATIA0\n" + MM + TILTED)
+    np.testing.assert_allclose(tp.axis, [[0.6, 0, 0.8]] * 3)
+
+
+def test_multax_off_is_the_work_plane_z_in_fusion_apt(tmp_path: Path) -> None:
+    # Autodesk's APT posts write MULTAX/OFF only before a section whose tool axis is its Z
+    tp = cl(tmp_path, "PPRINT/'Autodesk Fusion'\n" + MM + TILTED)
+    np.testing.assert_allclose(tp.axis, [[0.6, 0, 0.8], [0.6, 0, 0.8], [0, 0, 1]])
+
+
+def test_multax_off_after_a_tilted_axis_is_refused_where_undocumented(tmp_path: Path) -> None:
+    e = err(tmp_path, MM + TILTED)
+    assert e.line == 7 and "MULTAX/OFF (line 6)" in e.reason and "TLAXIS" in e.reason
+    tp = cl(tmp_path, MM + TILTED.replace("MULTAX/OFF\n", "MULTAX/OFF\nTLAXIS/0,0,1\n"))
+    np.testing.assert_allclose(tp.axis[-1], [0, 0, 1])
+    vertical = cl(tmp_path, MM + "MULTAX/ON\nGOTO/0,0,0,0,0,1\nMULTAX/OFF\nGOTO/2,0,0\n")  # both readings agree
+    np.testing.assert_allclose(vertical.axis, [[0, 0, 1]] * 2)
+
+
+def test_bare_multax_is_multax_on(tmp_path: Path) -> None:
+    # CATIA's APT format lists MULTAX and MULTAX/ON as one statement; NCL reads a bare MULTAX as ON
+    tp = cl(tmp_path, MM + "MULTAX\nGOTO/0,0,0,0.6,0,0.8\n")
+    np.testing.assert_allclose(tp.axis, [[0.6, 0, 0.8]])
 
 
 def test_multax_off_rejects_tool_axis(tmp_path: Path) -> None:

@@ -32,6 +32,18 @@ Conventions
 
 ``centre_line``: the CL points are the tool centre (True), tool contact points (False) or
 not said (None); cutter compensation records are only acceptable on centre-line data.
+
+``locked_axis``: the tool axis of the 3-number GOTOs after ``MULTAX/OFF``:
+
+- ``"last"``: the axis of the last position before it. CATIA / DELMIA "APT Format: Syntax of
+  APT Instructions", MULTAX: "the tool axis is considered as locked. The components of the
+  locked tool axis are the components defined on the last 5-axis position preceding the
+  MULTAX/OFF statement" (NCL's APT processor also keeps the axis in effect).
+- ``"z"``: (0,0,1) of the current frame: Autodesk's APT post-processors for Fusion / HSM write
+  ``MULTAX/OFF`` only for sections whose tool axis is the work plane's Z.
+- ``None``: not documented. Where the two readings agree (the axis is (0,0,1) at the
+  ``MULTAX/OFF``) that is the axis; otherwise a 3-number GOTO before a ``TLAXIS`` is refused
+  rather than guessed.
 """
 
 from __future__ import annotations
@@ -54,6 +66,7 @@ class Dialect:
     arc_direction: ArcDirection | None
     frames: FrameMode
     centre_line: bool | None = None
+    locked_axis: Literal["last", "z"] | None = None
 
     def describe(self, resolved: ArcDirection) -> str:
         """One line for the user: the dialect and the conventions applied (``resolved``: the arc direction used)."""
@@ -74,8 +87,8 @@ DIALECTS: dict[str, Dialect] = {
     "makino": Dialect("Makino FF CAM APT-CL", "cw", "local"),
     "creo": Dialect("PTC Creo / Pro/CLfile", "ccw", "world"),
     "solidworks": Dialect("SolidWorks CAM APT", "ccw", "world"),
-    "catia": Dialect("CATIA APT", None, "local"),
-    "fusion": Dialect("Autodesk Fusion / HSM APT", None, "local"),
+    "catia": Dialect("CATIA APT", None, "local", locked_axis="last"),
+    "fusion": Dialect("Autodesk Fusion / HSM APT", None, "local", locked_axis="z"),
     "apt": Dialect("generic APT", None, "local"),
 }
 

@@ -5,8 +5,9 @@ an error because no CAM format we know defines it. ``FROM`` is the tool's starti
 remembered for ``GOHOME``: a rapid pose once a tool is loaded; before the first tool load (Makino
 FF CAM writes it there) it only sets the start, since no tool length could place it.
 ``GODLTA/d`` moves along the tool axis, ``GODLTA/dx,dy,dz`` by a vector; ``RAPID``
-makes the next motion a rapid; ``MULTAX/OFF`` resets the axis to (0,0,1) and forbids 6-number
-GOTOs; ``TLAXIS/i,j,k`` sets the carried axis.
+makes the next motion a rapid; ``MULTAX`` (bare, as CATIA and NCL write it) is ``MULTAX/ON``;
+``MULTAX/OFF`` forbids 6-number GOTOs and locks the axis as the dialect says (``locked_axis``
+in :mod:`.dialects`); ``TLAXIS/i,j,k`` sets the carried axis.
 
 ``RETRCT`` withdraws the tool along its axis, at rapid, until the tip is on the clearance surface
 of the last ``CLEARP`` or ``CLRSRF`` (ICAM's APT vocabulary, "The RETRCT / CLEARP / CLRSRF
@@ -40,7 +41,17 @@ def point_axis(st: ReaderState, args: str, what: str, line: int) -> tuple[list[f
             raise st.fail(f"{what} has a tool axis (6 numbers) but MULTAX/OFF is in effect", line)
         st.check_axis(vals[3:], "tool axis", line)
         return vals[:3], (vals[3], vals[4], vals[5])
+    unsure_axis(st, what, line)
     return vals, st.axis
+
+
+def unsure_axis(st: ReaderState, what: str, line: int) -> None:
+    """Refuse a motion that needs the carried tool axis where MULTAX/OFF left it undecided."""
+    if st.locked_axis_line is not None:
+        a = ", ".join(f"{v:.6g}" for v in st.axis)
+        raise st.fail(f"{what} after MULTAX/OFF (line {st.locked_axis_line}), which followed the tilted tool axis "
+                      f"({a}): {st.dialect.name} does not document whether the axis stays so (as CATIA's does) "
+                      "or returns to (0,0,1) (as Fusion's does); give TLAXIS/i,j,k after MULTAX/OFF", line)
 
 
 def motion_to(st: ReaderState, p: list[float], a: Axis, line: int) -> None:
@@ -92,6 +103,7 @@ def godlta(st: ReaderState, rec: Record) -> None:
     vals = st.numbers(rec.args, "GODLTA", rec.line)
     st.coordinate(vals, "GODLTA", rec.line)
     p, a = st.current_pose("GODLTA", rec.line)
+    unsure_axis(st, "GODLTA", rec.line)
     if len(vals) == 1:
         q = p + vals[0] * a
     elif len(vals) == 3:
@@ -174,15 +186,21 @@ def tlaxis(st: ReaderState, rec: Record) -> None:
         raise st.fail(f"TLAXIS needs 3 numbers, got {len(vals)}", rec.line)
     st.check_axis(vals, "tool axis", rec.line)
     st.axis = (vals[0], vals[1], vals[2])
+    st.locked_axis_line = None
 
 
 def multax(st: ReaderState, rec: Record) -> None:
     word = rec.args.strip().upper()
-    if word == "ON":
+    if word in ("", "ON"):
         st.multax = True
+        st.locked_axis_line = None
     elif word == "OFF":
         st.multax = False
-        st.axis = (0.0, 0.0, 1.0)
+        vertical = np.allclose(st.axis, (0.0, 0.0, 1.0), rtol=0.0, atol=1e-9)
+        if st.dialect.locked_axis == "z" or (st.dialect.locked_axis is None and vertical):
+            st.axis = (0.0, 0.0, 1.0)
+        elif st.dialect.locked_axis is None:
+            st.locked_axis_line = rec.line
     else:
         raise st.fail(f"MULTAX needs ON or OFF, got '{rec.args.strip()[:40]}'", rec.line)
 

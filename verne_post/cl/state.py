@@ -159,6 +159,7 @@ class ReaderState:
         self.spindle_on = False
         self.tool = 0
         self.multax: bool | None = None
+        self.locked_axis_line: int | None = None  # a MULTAX/OFF that left the tool axis undecided (dialects)
         self.cycle: Any = None  # the active drilling cycle, (cycles.CycleSpec, feed mm/min), or None
         self.last_cycle: Any = None
         self.curve: Any = None  # a CIRCLE/MOVARC waiting for its end GOTO, or a NURBS being read
