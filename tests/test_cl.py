@@ -366,6 +366,15 @@ def test_msys_rotated_frame(tmp_path: Path) -> None:
     np.testing.assert_allclose(tp.axis[1], [0, 1, 0], atol=1e-15)  # axis carried in CL numbers
 
 
+def test_catia_origin_with_x_and_z_axes(tmp_path: Path) -> None:
+    # CATIA's NC axis, ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz: here X = part +Y, Z = part +Z, so Y = part -X
+    tp = cl(tmp_path, MM + "ORIGIN/10,20,30,0,1,0,0,0,1\nGOTO/1,2,3,1,0,0\n", frame="apply")
+    np.testing.assert_allclose(tp.tip[0], [10 - 2, 20 + 1, 30 + 3])
+    np.testing.assert_allclose(tp.axis[0], [0, 1, 0], atol=1e-15)
+    e = err(tmp_path, MM + "ORIGIN/0,0,0,1,0,0,0.1,0,0.995\nGOTO/0,0,0\n")
+    assert e.line == 3 and "not orthogonal" in e.reason
+
+
 def test_msys_tilted_frame_with_rounded_axes(tmp_path: Path) -> None:
     # X tilted 30 deg about Y, written with 7 decimals as NX does: orthonormalised
     tp = cl(tmp_path, MM + "MSYS/0,0,0,0.8660254,0.0000000,-0.5000000,0.0000000,1.0000000,0.0000000\nGOTO/0,0,0\n",

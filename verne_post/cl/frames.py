@@ -2,7 +2,7 @@
 
 ``MSYS/x,y,z,xi,xj,xk,yi,yj,yk`` (origin, X axis, Y axis) and ``CSYS/`` (a 3x4 matrix, row-major:
 columns X, Y, Z, origin) describe a frame; ``ORIGIN/x,y,z`` one with the same axes as the CAM's
-absolute frame. X and Y must be unit and orthogonal within 1e-3 (they are then orthonormalised and
+absolute frame, ``ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz`` one with the X and Z axes given (CATIA). X and Y must be unit and orthogonal within 1e-3 (they are then orthonormalised and
 Z = X x Y). In ``world`` dialects the data are already in one frame and these records are read
 for validity only; ``TRNTYP`` (SolidWorks CAM's statement of that) is informational.
 """
@@ -70,10 +70,19 @@ def csys(st: ReaderState, rec: Record) -> None:
 
 
 def origin(st: ReaderState, rec: Record) -> None:
+    """``ORIGIN/x,y,z`` or, as CATIA documents its NC axis ("APT Format: Syntaxes Interpreted by
+    APT Import"), ``ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz``: the origin, X axis and Z axis (Y = Z x X)."""
     v = st.numbers(rec.args, "ORIGIN", rec.line)
-    if len(v) != 3:
-        raise st.fail(f"ORIGIN needs 3 numbers (the work origin), got {len(v)}", rec.line)
-    _make_frame(st, v, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], None, "ORIGIN", rec.line)
+    if len(v) == 3:
+        _make_frame(st, v, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], None, "ORIGIN", rec.line)
+    elif len(v) == 9:
+        if abs(float(np.dot(v[3:6], v[6:9]))) > _ANG_TOL:
+            raise st.fail("ORIGIN X and Z axes are not orthogonal", rec.line)
+        y = np.cross(v[6:9], v[3:6])
+        _make_frame(st, v[0:3], v[3:6], [float(c) for c in y], v[6:9], "ORIGIN", rec.line)
+    else:
+        raise st.fail(f"ORIGIN needs 3 numbers (the work origin) or 9 (origin, X axis, Z axis), got {len(v)}",
+                      rec.line)
 
 
 def trntyp(st: ReaderState, rec: Record) -> None:
