@@ -2,9 +2,10 @@
 
 ``MSYS/x,y,z,xi,xj,xk,yi,yj,yk`` (origin, X axis, Y axis) and ``CSYS/`` (a 3x4 matrix, row-major:
 columns X, Y, Z, origin) describe a frame; ``ORIGIN/x,y,z`` one with the same axes as the CAM's
-absolute frame, ``ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz`` one with the X and Z axes given (CATIA). X and Y must be unit and orthogonal within 1e-3 (they are then orthonormalised and
-Z = X x Y). In ``world`` dialects the data are already in one frame and these records are read
-for validity only; ``TRNTYP`` (SolidWorks CAM's statement of that) is informational.
+absolute frame, ``ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz`` one with the X and Z axes given (CATIA).
+X and Y must be unit and orthogonal within 1e-3 (they are then orthonormalised and Z = X x Y).
+In ``world`` dialects the data are already in one frame and these records are read for validity
+only; ``TRNTYP`` (SolidWorks CAM's statement of that) is informational.
 """
 
 from __future__ import annotations
