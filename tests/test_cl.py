@@ -658,6 +658,93 @@ def test_bad_circles(tmp_path: Path, text: str, line: int, message: str) -> None
     assert e.line == line and message in e.reason
 
 
+# --------------------------------------------------------------------------- APT arcs: INDIRV, TLON,GOFWD
+
+
+def _fmt(v: np.ndarray | list[float]) -> str:
+    return ",".join(f"{x:.12f}" for x in v)
+
+
+def test_gofwd_runs_on_the_circle_to_the_crossing_of_the_check_line(tmp_path: Path) -> None:
+    # Creo's CIRC_INTERPOLATION APT_FORMAT and CATIA's default circle output. Each case is built
+    # from its answer: a sweep, and a check line through that end point, either through the centre
+    # (its other crossing half a turn away, so the end is the 1st crossing below half a turn and
+    # the 2nd above it, as CATIA's "ON,2,INTOF" full circles are) or a chord at a random angle.
+    rng = np.random.default_rng(11)
+    lines, cases = MM.rstrip("\n").split("\n"), []
+    for k in range(200):
+        axis = np.array([0.0, 0.0, 1.0]) if k % 2 else _unit(rng.normal(size=3) + np.array([0, 0, 3.0]))
+        c, r = rng.uniform(-100, 100, 3), rng.uniform(0.5, 80)
+        u = _unit(np.cross(axis, rng.normal(size=3)))
+        sense = 1.0 if rng.random() < 0.5 else -1.0
+        w = sense * np.cross(axis, u)  # the way the tool goes at the start
+        height = rng.uniform(-20, 20)
+        start = c + height * axis + r * u
+        sweep = rng.uniform(0.05, 2 * np.pi - 0.05) if k % 5 else 2 * np.pi
+        end = c + height * axis + r * (np.cos(sweep) * u + np.sin(sweep) * w)
+        radial = _unit(end - c - height * axis)
+        if k % 3 == 0 and k % 5:  # a chord through the end: its other end E + t d, t = -2 (E - centre) . d
+            tangent = np.cos(sweep) * w - np.sin(sweep) * u
+            d = _unit(tangent + rng.uniform(-2, 2) * radial)
+            other = (end - 2 * ((end - c - height * axis) @ d) * d) - c - height * axis
+            other_angle = np.arctan2(other @ w, other @ u) % (2 * np.pi)
+            a, b = end - rng.uniform(1, 9) * d, end + rng.uniform(1, 9) * d
+            crossing = 1 if other_angle > sweep or other_angle < 1e-6 else 2
+        else:
+            a, b = end - rng.uniform(0.1, 2) * r * radial, end + rng.uniform(0.1, 2) * r * radial
+            crossing = 1 if sweep < np.pi else 2
+        a, b = a + rng.uniform(-5, 5) * axis, b + rng.uniform(-5, 5) * axis  # the line is a plane along the axis
+        circle = f"{_fmt(c)},{r:.12f}" if k % 2 else f"{_fmt(c)},{_fmt(axis)},{r:.12f}"
+        intof = "" if crossing == 1 and k % 4 else f"{crossing},INTOF,"
+        direction = _unit(w + rng.uniform(-0.5, 0.5) * u)  # INDIRV need only point the way round
+        lines += [f"GOTO/{_fmt(start)},{_fmt(axis)}", f"INDIRV/{_fmt(direction)}",
+                  f"TLON, GOFWD / (CIRCLE / {circle}), ON, {intof}(LINE / {_fmt(a)},{_fmt(b)})"]
+        cases.append((start, end, c, axis, r, sweep, sense, len(lines)))
+    tp = cl(tmp_path, "\n".join(lines) + "\n")
+    assert tp.warnings == ()
+    first = np.flatnonzero(np.isin(tp.line, [n - 2 for *_, n in cases]))
+    for start_index, (start, end, c, axis, r, sweep, sense, line) in zip(first, cases, strict=True):
+        stop = start_index + 1 + np.flatnonzero(tp.line[start_index + 1:] == line)
+        assert len(stop) and stop[0] == start_index + 1 and np.all(np.diff(stop) == 1)
+        path = tp.tip[np.r_[start_index, stop]]
+        np.testing.assert_allclose(path[0], start, atol=1e-9)
+        np.testing.assert_allclose(path[-1], end, atol=1e-8)
+        rel = path - c
+        along = rel @ axis
+        radial = rel - along[:, None] * axis
+        np.testing.assert_allclose(along, along[0], atol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(radial, axis=1), r, rtol=1e-9)
+        turns = np.einsum("ij,j->i", np.cross(radial[:-1], radial[1:]), axis) * sense
+        angles = np.arctan2(turns, np.einsum("ij,ij->i", radial[:-1], radial[1:]))
+        assert np.all(angles > 0) and abs(angles.sum() - sweep) < 1e-8
+        sagitta = r * (1 - np.cos(angles / 2))
+        assert sagitta.max() <= 0.001 * (1 + 1e-9)  # the default chordal tolerance, mm
+        np.testing.assert_allclose(tp.axis[stop], np.broadcast_to(axis, (len(stop), 3)), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("records", "message"),
+    [
+        ("INDIRV/0,1,0\nTLLFT,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,1,0,0)", "only TLON,GOFWD"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),TO,(LINE/0,0,0,1,0,0)", "only ON"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,12),ON,(LINE/0,0,0,1,0,0)", "starts 10 from the circle's axis"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/20,0,0,20,1,0)", "does not cross the circle"),
+        ("INDIRV/1,0,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,1,0,0)", "does not point along the circle"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,1,0,0,10),ON,(LINE/0,0,0,1,0,0)", "axis is not the tool axis"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(PLANE/0,0,1,0),ON,(LINE/0,0,0,1,0,0)", "only the form"),
+    ],
+)
+def test_gofwd_that_cannot_be_honoured_is_refused(tmp_path: Path, records: str, message: str) -> None:
+    e = err(tmp_path, MM + "GOTO/10,0,0\n" + records + "\n")
+    assert e.line == 5 and message in e.reason
+
+
+def test_gofwd_without_indirv_goes_on_the_way_it_was_going(tmp_path: Path) -> None:
+    # APT: no INDIRV, the motion keeps the direction of the move before it (here +Y at (10, 0))
+    tp = cl(tmp_path, MM + "GOTO/10,-5,0\nGOTO/10,0,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,0,1,0)\n")
+    np.testing.assert_allclose(tp.tip[-1], [0, 10, 0], atol=1e-12)
+
+
 # --------------------------------------------------------------------------- FROM / GOHOME
 
 
@@ -821,7 +908,7 @@ def test_tracut_is_read_as_information_with_a_warning(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("record", "message"),
     [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("INDEX/1", "INDEX"), ("MOVE/1,2,3", "MOVE"),
-     ("CONT/1,2,3", "CONT")],
+     ("CONT/1,2,3", "CONT"), ("TLON,GOTO/1,2,3", "TLON,GOTO")],
 )
 def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
     e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")

@@ -9,11 +9,21 @@ within the chordal tolerance, never a chord; the tool axis is slerped.
 
 ``NURBS/`` then ``KNOT/`` values (continued over several records) and ``CNTRL/x,y,z`` control
 points: a spline from the current position, evaluated by :mod:`.spline` to the chordal tolerance.
+
+APT's own arc statement, which Creo writes with ``CIRC_INTERPOLATION APT_FORMAT`` and CATIA by
+default (PTC Creo help "CL Output for Circular Interpolation"; CATIA / DELMIA "APT Format: Syntax
+of APT Instructions"): ``INDIRV/i,j,k`` then ``TLON,GOFWD/(CIRCLE/xc,yc,zc,r),ON,[n,INTOF,]
+(LINE/x1,y1,z1,x2,y2,z2)``. The tool centre runs on the circle (an APT circle is the cylinder of
+radius r about the line through the centre parallel to Z; ``CIRCLE/xc,yc,zc,i,j,k,r`` gives its
+axis), from the current position, in the direction INDIRV gives, until it is on the line (the
+plane through it parallel to the axis), at its n-th crossing (default the first). The direction is
+read from INDIRV, so these arcs do not depend on the dialect.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -156,6 +166,102 @@ def end_curve(st: ReaderState, p_end: list[float], a_end: tuple[float, float, fl
     st.arcs.append(Arc(start, len(st.rows) - 1, c, n, spec.line))
 
 
+# ---------------------------------------------------------------------------- APT GOFWD arcs
+
+_GOFWD_RE = re.compile(
+    r"\A\s*\(\s*CIRCLE\s*/([^()]*)\)\s*,\s*(ON|TO|PAST|TANTO)\s*,\s*(?:([^,()]*),\s*INTOF\s*,\s*)?"
+    r"\(\s*LINE\s*/([^()]*)\)\s*\Z", re.I)
+
+
+def indirv(st: ReaderState, rec: Record) -> None:
+    """INDIRV/i,j,k: the direction the next GOFWD starts in, from the current position."""
+    vals = st.numbers(rec.args, "INDIRV", rec.line)
+    if len(vals) != 3:
+        raise st.fail(f"INDIRV needs 3 numbers, got {len(vals)}", rec.line)
+    d = np.array(vals, dtype=float)
+    if not 1e-9 < float(np.linalg.norm(d)) < 1e9:
+        raise st.fail("INDIRV direction has zero or absurd length", rec.line)
+    st.indirv = (d / np.linalg.norm(d), len(st.rows), rec.line)
+
+
+def gofwd(st: ReaderState, rec: Record) -> None:
+    """TLON,GOFWD/(CIRCLE/...),ON,[n,INTOF,](LINE/...): an arc to the check line (module docstring)."""
+    no_pending_curve(st, "GOFWD", rec.line)
+    if st.cycle is not None:
+        raise st.fail("GOFWD inside a drilling CYCLE", rec.line)
+    if rec.word != "TLON,GOFWD":
+        raise st.fail(f"{rec.word[:40]}: only TLON,GOFWD along a CIRCLE is supported (the tool centre on the "
+                      "circle); offset motion needs the part surfaces: output GOTO points", rec.line)
+    m = _GOFWD_RE.match(rec.args)
+    if m is None:
+        raise st.fail("GOFWD: only the form (CIRCLE/x,y,z,r),ON,[n,INTOF,](LINE/x1,y1,z1,x2,y2,z2) is supported",
+                      rec.line)
+    if m.group(2).upper() != "ON":
+        raise st.fail(f"GOFWD ... {m.group(2).upper()}: only ON (the tool centre on the check line) is supported; "
+                      "TO, PAST and TANTO need the cutter's radius", rec.line)
+    circle_nums = st.numbers(m.group(1), "GOFWD CIRCLE", rec.line)
+    line_nums = st.numbers(m.group(4), "GOFWD LINE", rec.line)
+    if len(circle_nums) not in (4, 7) or len(line_nums) != 6:
+        raise st.fail(f"GOFWD needs CIRCLE/x,y,z,r (or x,y,z,i,j,k,r) and LINE/x1,y1,z1,x2,y2,z2, got "
+                      f"{len(circle_nums)} and {len(line_nums)} numbers", rec.line)
+    crossing = 1
+    if m.group(3) is not None:
+        count = st.number(m.group(3), "GOFWD INTOF", rec.line)
+        if count != int(count) or not 1 <= count <= 10_000:
+            raise st.fail(f"GOFWD: the n of n,INTOF must be a whole number from 1 to 10000, got {count:g}", rec.line)
+        crossing = int(count)
+    st.coordinate(circle_nums[:3] + line_nums, "GOFWD", rec.line)
+    c = np.array(circle_nums[:3], dtype=float)
+    n = _axis(st, circle_nums, "GOFWD circle", rec.line) if len(circle_nums) == 7 else np.array([0.0, 0.0, 1.0])
+    r = _radius(st, circle_nums[-1], "GOFWD circle", rec.line)
+    p0, a0 = st.current_pose("GOFWD", rec.line)
+    if abs(float(a0 @ n)) < 1.0 - 1e-6:
+        raise st.fail("GOFWD along a circle whose axis is not the tool axis is not supported", rec.line)
+    if st.indirv is not None and st.indirv[1] == len(st.rows):
+        direction = st.indirv[0]
+    elif len(st.rows) >= 2:  # APT: without INDIRV the motion goes on the way it was going
+        direction = p0 - np.array(st.rows[-2][:3], dtype=float)
+    else:
+        raise st.fail("GOFWD without INDIRV and without a move before it to give its direction", rec.line)
+    st.indirv = None
+    offset = (p0 - c) - float((p0 - c) @ n) * n
+    r0 = float(np.linalg.norm(offset))
+    if abs(r0 - r) > max(0.01 / st.scale, 1e-3 * r):
+        raise st.fail(f"GOFWD starts {r0:.5g} from the circle's axis, its radius is {r:.5g}", rec.line)
+    u = offset / r0
+    turn = float(np.cross(u, direction) @ n) / float(np.linalg.norm(direction))
+    if abs(turn) < 0.1:
+        raise st.fail("INDIRV does not point along the circle at the GOFWD's start (more than 84 degrees off "
+                      "its tangent)", rec.line)
+    axis = n if turn > 0 else -n  # the arc runs counter-clockwise about this axis
+    w = np.cross(axis, u)
+    # The check line, in the plane of the arc: the angles phi from u (towards w) where the tool
+    # centre r (cos phi, sin phi) is on it.
+    a2 = np.array([(np.array(line_nums[k:k + 3]) - c) @ e for k in (0, 3) for e in (u, w)]).reshape(2, 2)
+    along = a2[1] - a2[0]
+    length = float(np.linalg.norm(along))
+    if length < 1e-9 * max(r, 1.0):
+        raise st.fail("GOFWD check LINE has two coincident points in the plane of the circle", rec.line)
+    normal = np.array([-along[1], along[0]]) / length
+    h = float(normal @ a2[0]) / r
+    if abs(h) > 1.0 + 1e-9:
+        raise st.fail("GOFWD check LINE does not cross the circle", rec.line)
+    phi0, half = math.atan2(normal[1], normal[0]), math.acos(max(-1.0, min(1.0, h)))
+    small = max(1e-4 / st.scale, 1e-9 * r) / r  # the start itself on the line is not its end
+    found = sorted({(phi0 + sign * half) % (2 * math.pi) for sign in (1, -1)})
+    found = [x if x > small else x + 2 * math.pi for x in found]
+    found.sort()
+    sweep = found[(crossing - 1) % len(found)] + 2 * math.pi * ((crossing - 1) // len(found))
+    height = float((p0 - c) @ n) * n
+    p1 = c + height + r * (math.cos(sweep) * u + math.sin(sweep) * w)
+    try:
+        points, _t = arc_points(c, axis, p0, p1, sweep, "ccw", st.tol)
+    except ValueError as error:
+        raise st.fail(str(error), rec.line) from None
+    rapid = st.take_rapid()
+    st.add_poses(points, np.broadcast_to(np.array(st.axis), points.shape), rec.line, rapid, "arc")
+
+
 # ---------------------------------------------------------------------------- NX splines
 
 
@@ -208,4 +314,8 @@ def finish_spline(st: ReaderState) -> None:
     st.skip_goto = np.array(points[-1], dtype=float) if len(points) else None
 
 
-HANDLERS = {"CIRCLE": circle, "MOVARC": movarc, "NURBS": nurbs, "KNOT": knot, "CNTRL": cntrl}
+HANDLERS = {
+    "CIRCLE": circle, "MOVARC": movarc, "NURBS": nurbs, "KNOT": knot, "CNTRL": cntrl, "INDIRV": indirv,
+    **{f"{modifier},{go}": gofwd for modifier in ("TLON", "TLLFT", "TLRGT", "TLOFPS", "TLONPS")
+       for go in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN")},
+}  # fmt: skip

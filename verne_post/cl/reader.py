@@ -85,7 +85,6 @@ _REJECTED = {
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "ROTABL": "ROTABL (table rotation in the CL data) is not supported: give 5-axis tool axes in GOTO records",
-    "INDIRV": "INDIRV is not supported: the CL file must contain explicit GOTO points",
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
     **{w: f"motion record {w} is not supported: the CL file must contain explicit GOTO points"
        for w in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN", "GO")},
@@ -167,6 +166,8 @@ def _decide_units(text: str, override: Units | None, src: str, warnings: Warning
 def _dispatch(st: ReaderState, rec: Record) -> None:
     if isinstance(st.curve, curves.PendingSpline) and rec.word not in ("KNOT", "CNTRL"):
         curves.finish_spline(st)
+    if "," in rec.word:  # a motion statement's modifier: TLON, GOFWD -> TLON,GOFWD
+        rec = rec._replace(word=re.sub(r"\s*,\s*", ",", rec.word))
     handler = HANDLERS.get(rec.word)
     if handler is not None:
         handler(st, rec)
@@ -174,6 +175,8 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
         raise st.fail("continuation '$' at end of file: the record is incomplete", rec.line)
     elif rec.word in _REJECTED:
         raise st.fail(_REJECTED[rec.word], rec.line)
+    elif rec.word.rpartition(",")[2].startswith("GO"):  # a motion statement with modifiers: never dropped
+        raise st.fail(f"motion statement {rec.word[:40]} is not supported: output GOTO points", rec.line)
     elif rec.word in _INFORMATIONAL:
         st.warn(rec.line, _INFORMATIONAL[rec.word], kind=rec.word)
     elif rec.word not in _IGNORED and not rec.word.startswith(_IGNORED_PREFIXES):
