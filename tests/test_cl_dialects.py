@@ -88,6 +88,43 @@ def test_creo_arcs_run_counter_clockwise(tmp_path: Path) -> None:
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)
 
 
+def test_creo_arc_points_listed_after_the_goto_stay_on_the_arc(tmp_path: Path) -> None:
+    # PTC Creo help, "CL Output for Circular Interpolation": after CIRCLE, "GOTO / x, y, z" then
+    # plain lines "x, y, z", "the points on the arc, the last line specifying the arc end point"
+    # (POINTS_&_ARC, or ARC_ONLY with NUMBER_OF_ARC_PTS). Arcs of up to 350 degrees through a few
+    # listed points: every pose on the circle, through each point, in order, the whole sweep.
+    rng = np.random.default_rng(5)
+    lines, cases = CREO_HEAD.rstrip("\n").split("\n"), []
+    for _ in range(60):
+        c, r = rng.uniform(-50, 50, 3), rng.uniform(1, 40)
+        sweep = rng.uniform(0.2, math.radians(350))
+        angles = np.sort(rng.uniform(0, sweep, rng.integers(0, 6)))
+        angles = np.r_[angles[angles > 1e-3], sweep]
+        points = c + r * np.column_stack([np.cos(angles), np.sin(angles), np.zeros(len(angles))])
+        start = c + np.array([r, 0, 0])
+        lines += [f"GOTO / {start[0]:.10f}, {start[1]:.10f}, {start[2]:.10f}",
+                  f"CIRCLE / {c[0]:.10f}, {c[1]:.10f}, {c[2]:.10f},  $", f"0.0, 0.0, 1.0,  {r:.10f}"]
+        first = len(lines) + 1
+        lines += [("GOTO / " if k == 0 else "        ") + ", ".join(f"{v:.10f}" for v in p)
+                  for k, p in enumerate(points)]
+        cases.append((c, r, sweep, points, first))
+        lines.append(f"GOTO / {start[0]:.10f}, {start[1]:.10f}, {start[2] + 5:.10f}")  # off the arc
+    tp = read(tmp_path, "\n".join(lines) + "\n")
+    assert tp.warnings == ()
+    for c, r, sweep, points, first in cases:
+        at = [int(np.flatnonzero(tp.line == first + k)[-1]) for k in range(len(points))]
+        begin = at[0] - int(np.sum(tp.line == first))
+        mask = np.zeros(len(tp), bool)
+        mask[begin:at[-1] + 1] = True
+        np.testing.assert_allclose(tp.tip[at], points, atol=1e-9)
+        d = tp.tip[mask] - c
+        np.testing.assert_allclose(np.hypot(d[:, 0], d[:, 1]), r, rtol=1e-8)
+        assert swept(tp, c, np.array([0, 0, 1.0]), mask) == pytest.approx(sweep, abs=1e-8)
+        steps = np.diff(np.unwrap(np.arctan2(d[:, 1], d[:, 0])))
+        assert np.all(steps > 0)  # counter-clockwise all along
+        assert np.max(r * (1 - np.cos(steps / 2))) <= 0.001 * (1 + 1e-9)  # on the arc, not its chords
+
+
 def test_arc_direction_override(tmp_path: Path) -> None:
     tp = read(tmp_path, quarter(NX_HEAD), arc_direction="ccw")
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)

@@ -35,6 +35,21 @@ def test_comment_ending_in_dollar_does_not_swallow_a_record() -> None:
     assert lex("$$ price in $\nGOTO/1,2,3\n") == [Record("GOTO", "1,2,3", 2)]
 
 
+def test_plain_lines_of_numbers_after_a_goto_are_its_points() -> None:
+    # PTC Creo help, "CL Output for Circular Interpolation": GOTO / x, y, z then lines x, y, z
+    text = "GOTO / 1, 2, 3\n 4.5, -5, 6E1\n\n$$ c\n7,8,9,0,0,1\nSPINDL/100\n1,2,3\nGOTO/1,1,1\n+.5,2.,3\n"
+    assert lex(text) == [
+        Record("GOTO", " 1, 2, 3", 1),
+        Record("GOTO", "4.5, -5, 6E1", 2, follows_goto=True),
+        Record("GOTO", "7,8,9,0,0,1", 5, follows_goto=True),
+        Record("SPINDL", "100", 6),
+        Record("1,2,3", "", 7),  # not after a GOTO: left for the reader to call unknown
+        Record("GOTO", "1,1,1", 8),
+        Record("GOTO", "+.5,2.,3", 9, follows_goto=True),
+    ]
+    assert all(r.follows_goto == (r.line in (2, 5, 9)) for r in lex(text))
+
+
 def test_text_records_are_literal() -> None:
     assert lex("PARTNO MFG_TURN_MILL\nPPRINT/ A $$ B $\nINSERT/M08\n") == [
         Record("PARTNO", "MFG_TURN_MILL", 1), Record("PPRINT", "A $$ B $", 2), Record("INSERT", "M08", 3)]

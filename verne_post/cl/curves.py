@@ -164,6 +164,15 @@ def end_curve(st: ReaderState, p_end: list[float], a_end: tuple[float, float, fl
     st.axis = a_end
     st.add_pose(p_end, a_end, line, rapid, motion="arc")
     st.arcs.append(Arc(start, len(st.rows) - 1, c, n, spec.line))
+    st.last_arc = (spec, len(st.rows))
+
+
+def continue_arc(st: ReaderState) -> None:
+    """Make the coming GOTO point the end of one more piece of the arc that the last GOTO ended,
+    when nothing has moved since: Creo lists an arc's points on plain lines after its GOTO."""
+    if st.last_arc is not None and st.last_arc[1] == len(st.rows) and st.last_arc[0].word == "CIRCLE":
+        spec = st.last_arc[0]
+        st.curve = PendingArc(spec.centre, spec.axis, spec.radius, 1, None, spec.line, spec.word)
 
 
 # ---------------------------------------------------------------------------- APT GOFWD arcs

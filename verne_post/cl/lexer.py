@@ -13,6 +13,10 @@ The lexer knows the *syntax* every CAM family shares and nothing of what a recor
   text); Pro/ENGINEER writes ``PARTNO`` with a space instead of the slash.
 - NX "Information listing" headers (before the first record) and ``Tool Path Listing has N lines``
   trailers are skipped; their fields are TAB- or space-separated.
+- A plain line of numbers after a ``GOTO`` (or after another such line) is one more point of it:
+  PTC Creo help, "CL Output for Circular Interpolation": ``GOTO / x, y, z`` then lines ``x, y, z``,
+  "the last line specifying the arc end point". It is yielded as a ``GOTO`` record with
+  ``follows_goto`` set, so the reader can keep such points on the arc they belong to.
 
 Each record is yielded as a :class:`Record` (word, argument text, 1-based first line);
 :func:`record_runs` yields the same records with runs of plain one-line ``GOTO/`` records
@@ -36,14 +40,18 @@ _HEADER_RE = re.compile(
 )
 _TRAILER_RE = re.compile(r"(?:Tool Path Listing has \d+ lines\.?|=+)\Z", re.IGNORECASE)
 _TEXT_HEAD_RE = re.compile(r"(PPRINT|PARTNO|INSERT)(?:[ \t]*/|[ \t]+|\Z)", re.IGNORECASE)
+_NUMBER = r"[ \t]*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?[ \t]*"
+_POINT_RE = re.compile(rf"{_NUMBER}(?:,{_NUMBER}){{2,}}\Z")  # a line of three or more numbers
 
 
 class Record(NamedTuple):
-    """One logical record: ``word`` upper-case (``"GOTO"``, ``"TOOL PATH"``), ``args`` after the slash."""
+    """One logical record: ``word`` upper-case (``"GOTO"``, ``"TOOL PATH"``), ``args`` after the
+    slash; ``follows_goto``: a point on a plain line of numbers after a GOTO (module docstring)."""
 
     word: str
     args: str
     line: int
+    follows_goto: bool = False
 
 
 class GotoRun(NamedTuple):
@@ -112,6 +120,7 @@ def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
     seen_record = False
     run_args: list[str] = []
     run_lines: list[int] = []
+    after_goto = False  # the last record was a GOTO (or one of its points)
     for lineno, raw in enumerate(lines, 1):
         if in_comment:
             # Creo continues a '$$->' comment onto plain lines of numbers; a record ends it.
@@ -121,7 +130,7 @@ def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
                 continue
             in_comment = False
         if pending is None and raw[:5] == "GOTO/" and "$" not in raw:
-            seen_record = True
+            seen_record = after_goto = True
             run_args.append(raw[5:])  # the common case, kept cheap
             run_lines.append(lineno)
             if len(run_args) >= _RUN:
@@ -155,10 +164,14 @@ def record_runs(lines: Iterable[str]) -> Iterator[Record | GotoRun]:
                     continue  # blank or comment-only line inside a continued record
                 pending.append(body)
                 body, line, pending = "".join(pending), pending_line, None
-            record = _make(body, line)
+            if after_goto and line == lineno and _POINT_RE.match(body):
+                record = Record("GOTO", body.strip(), line, follows_goto=True)
+            else:
+                record = _make(body, line)
             if record is None:
                 continue
         seen_record = True
+        after_goto = record.word == "GOTO"
         if run_args:  # the GOTOs before this record first
             yield GotoRun(run_args, run_lines)
             run_args, run_lines = [], []

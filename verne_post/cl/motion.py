@@ -72,6 +72,8 @@ def motion_to(st: ReaderState, p: list[float], a: Axis, line: int) -> None:
 
 def goto(st: ReaderState, rec: Record) -> None:
     p, a = point_axis(st, rec.args, "GOTO", rec.line)
+    if rec.follows_goto and st.curve is None:
+        curves.continue_arc(st)  # a point listed after an arc's end GOTO lies on that arc (Creo)
     motion_to(st, p, a, rec.line)
 
 

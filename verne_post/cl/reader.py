@@ -269,7 +269,7 @@ def _run(st: ReaderState, recs: Iterable[Record | GotoRun], subs: _Subroutines, 
                 else:
                     subs.capturing[2].append(rec)
                 continue
-            if fast and rec.word == "GOTO" and "_" not in rec.args:  # float() would read 1_0 as 10
+            if fast and rec.word == "GOTO" and not rec.follows_goto and "_" not in rec.args:  # float(1_0) = 10
                 try:
                     vals = [float(v) for v in rec.args.split(",")]
                 except ValueError:

@@ -167,6 +167,7 @@ class ReaderState:
         self.home: tuple[int, np.ndarray, np.ndarray] | None = None  # FROM pose: (frame id, tip, axis) in it
         self.clearance: Clearance | None = None  # the surface RETRCT withdraws to
         self.indirv: tuple[np.ndarray, int, int] | None = None  # INDIRV: (unit direction, pose count, line)
+        self.last_arc: Any = None  # (curves.PendingArc, pose count) of the arc the last GOTO ended
         self.part_name: str | None = None
         self.units_seen: tuple[Units, int] | None = None
         self.cutcom_warned = False
