@@ -125,6 +125,17 @@ def test_creo_arc_points_listed_after_the_goto_stay_on_the_arc(tmp_path: Path) -
         assert np.max(r * (1 - np.cos(steps / 2))) <= 0.001 * (1 + 1e-9)  # on the arc, not its chords
 
 
+def test_creo_nurbs_motion_is_its_point_to_point_gotos(tmp_path: Path) -> None:
+    # PTC Creo help, "CL Output for NURBS Interpolation": MOVNRB/ON,o,k,w,n,s, knots, control points,
+    # then MOVNRB/NEXT and "the actual point-to-point output" as GOTOs, then MOVNRB/OFF
+    text = CREO_HEAD + ("GOTO / 0, 0, 0\nMOVNRB / M3AXIS\nMOVNRB / ON, 4, 8, 0, 4, 30.0\n"
+                        "MOVNRB / 1, 0, 0, 0, 0, 1, 1, 1, 1\nMOVNRB / 2, 0, 0, 0, 10, 5, 0, $\n20, 5, 0, 30, 0, 0\n"
+                        "MOVNRB / NEXT\nGOTO / 10, 3.75, 0\nGOTO / 20, 3.75, 0\nGOTO / 30, 0, 0\nMOVNRB / OFF\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[0, 0, 0], [10, 3.75, 0], [20, 3.75, 0], [30, 0, 0]])
+    assert tp.warnings == ()
+
+
 def test_arc_direction_override(tmp_path: Path) -> None:
     tp = read(tmp_path, quarter(NX_HEAD), arc_direction="ccw")
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)
