@@ -94,6 +94,9 @@ _REJECTED = {
     # ICAM's table of CL commands gives CONT and MOVE the class of GOTO (5000): motion that must
     # not be dropped, in forms whose details it does not document
     **{w: f"motion record {w} is not supported: write the motion as GOTO records" for w in ("CONT", "MOVE")},
+    # Vericut's "Supported APT-CLS NC Program Records": ARC is CIRCLE with the end point added,
+    # its field order not documented there
+    "ARC": "ARC (an arc with its end point) is not supported: write the arc as CIRCLE then GOTO",
 }  # fmt: skip
 # Read as information, with a warning: ICAM's documentation of TRACUT says most CAM systems pass it,
 # if at all, as the transformation already applied to the data that follow.
