@@ -87,7 +87,8 @@ _REJECTED = {
     "REFSYS": "REFSYS (reference system) is not supported; use MSYS",
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
-    "ROTABL": "ROTABL (table rotation in the CL data) is not supported: give 5-axis tool axes in GOTO records",
+    **{w: f"{w} (a rotary axis moved by the CL data) is not supported: give 5-axis tool axes in GOTO records"
+       for w in ("ROTABL", "ROTATE", "ROTHED")},
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
     **{w: f"motion record {w} is not supported: the CL file must contain explicit GOTO points"
        for w in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN", "GO")},
