@@ -136,6 +136,17 @@ def test_creo_nurbs_motion_is_its_point_to_point_gotos(tmp_path: Path) -> None:
     assert tp.warnings == ()
 
 
+def test_creo_inverse_time_auto_keeps_the_programmed_feed(tmp_path: Path) -> None:
+    # PTC Creo help, "Supported CL Data Commands": FEDRAT / INVERS, AUTO "specifies the inverse time
+    # feed rate ... for machines with rotary axes", FEDRAT / INVERS, OFF ends it: no value, the
+    # post computes inverse time from the feed programmed before
+    text = CREO_HEAD + ("GOTO / 0, 0, 10\nFEDRAT / 250.0, MMPM\nFEDRAT / INVERS, AUTO\n"
+                        "GOTO / 10, 0, 10, 0, 0.1, 0.99498743710662\nFEDRAT / INVERS, OFF\nGOTO / 20, 0, 10\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.feed, [100, 250, 250])
+    assert tp.warnings == () and not tp.inverse_time.any()
+
+
 def test_arc_direction_override(tmp_path: Path) -> None:
     tp = read(tmp_path, quarter(NX_HEAD), arc_direction="ccw")
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)

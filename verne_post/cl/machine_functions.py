@@ -3,6 +3,9 @@
 ``FEDRAT/f[,unit]`` or ``FEDRAT/unit,f``: ``MMPM``, ``IPM``, ``PERMIN`` (file units per minute,
 Makino FF CAM), ``MMPR``, ``IPR``, ``PERREV`` (per revolution: needs a spindle speed), ``INVERS``
 (inverse time, 1/min); bare: file units per minute. Feeds are modal and kept in mm/min.
+``FEDRAT/INVERS,AUTO`` and ``FEDRAT/INVERS,OFF`` carry no feed: Creo writes them around a sequence
+whose inverse-time feeds the post-processor is to compute from the programmed feed (PTC Creo
+help, "Supported CL Data Commands"), as this one always does; the feed stays as programmed.
 ``SPINDL/[RPM,]s[,CLW|CCLW]``, ``SPINDL/ON|OFF``; ``COOLNT/ON|FLOOD|MIST|THRU|OFF``;
 ``STOP``/``OPSTOP``; ``DELAY/s`` (a dwell in seconds). ``CUTCOM/LEFT|RIGHT|ON[,...]`` on
 centre-line data is accepted with one warning (a joint-space program cannot carry controller
@@ -50,6 +53,8 @@ def fedrat(st: ReaderState, rec: Record) -> None:
     toks = st.tokens(rec.args, "FEDRAT", rec.line)
     nums = [t for t in toks if isinstance(t, float)]
     words = [t for t in toks if isinstance(t, str)]
+    if not nums and words in (["INVERS", "AUTO"], ["INVERS", "OFF"]):
+        return
     if len(nums) != 1:
         raise st.fail(f"FEDRAT needs one feed value, got {len(nums)}", rec.line)
     if len(words) > 1:
