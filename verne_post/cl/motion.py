@@ -167,12 +167,11 @@ def retrct(st: ReaderState, rec: Record) -> None:
         raise st.fail(f"RETRCT: the tool axis is parallel to the clearance plane of line {surface.line}, "
                       "so no retract along it reaches the plane", rec.line)
     travel = (distance - float(normal @ p)) / along
+    st.take_rapid()  # a RAPID before it applies to it: it is a rapid anyway
     if travel <= 0.0:
         st.warn(rec.line, f"RETRCT: the tool is already at or beyond the clearance plane of line {surface.line} "
                 "along its axis; no move", kind="RETRCT beyond")
-        st.take_rapid()
         return
-    st.take_rapid()
     st.add_pose([float(v) for v in p + travel * a], st.axis, rec.line, rapid=True)
 
 
