@@ -157,10 +157,11 @@ def test_fixture_multi_operation_file() -> None:
     assert (tp.tool[changes[1].index :] == 7).all()
     # every pose line starts with a motion record
     assert all(text_lines[k - 1].split("/")[0] in ("GOTO", "FROM", "GOHOME") for k in tp.line)
-    # the drilling cycle: 2 holes x 3 poses at lines 37 and 38
-    assert (tp.line == 37).sum() == 3 and (tp.line == 38).sum() == 3
-    hole = tp.tip[tp.line == 37]
-    np.testing.assert_allclose(hole, [[0, 0, 8], [0, 0, -7], [0, 0, 8]])
+    # the drilling cycle from Z30, RTRCTO,AUTO: NX's G98, back up to Z30 after each hole (NX Post
+    # Builder, mom_cycle_retract_mode); over the second hole across first, then down (NX's
+    # SIM_RAPID_APPROACH), never a diagonal descent
+    np.testing.assert_allclose(tp.tip[tp.line == 37], [[0, 0, 8], [0, 0, -7], [0, 0, 30]])
+    np.testing.assert_allclose(tp.tip[tp.line == 38], [[25, 0, 30], [25, 0, 8], [25, 0, -7], [25, 0, 30]])
     # GOHOME: rapid back to the FROM pose (part frame)
     np.testing.assert_allclose(tp.tip[-1], [0, 0, 250])
     assert tp.rapid[-1]
@@ -986,15 +987,20 @@ def drill_file(cycle: str, head: str = "UNITS/MM", top: str = "20,100,10") -> st
     ],
 )
 def test_drill_cycle_expanded(tmp_path: Path, cycle: str) -> None:
+    # over the first hole across first, then down (NX's SIM_RAPID_APPROACH); RTRCTO,AUTO is G98,
+    # back to the level where the cycle began (Z50), the others retract to the clearance (Z13)
     tp = cl(tmp_path, drill_file(cycle))
+    up = 50 if "AUTO" in cycle else 13
+    across = [[30, 100, 50]] if up == 50 else []
     np.testing.assert_allclose(
         tp.tip,
-        [[0, 0, 50], [20, 100, 13], [20, 100, 0], [20, 100, 13], [30, 100, 13], [30, 100, 0], [30, 100, 13],
-         [30, 100, 50]],
+        [[0, 0, 50], [20, 100, 50], [20, 100, 13], [20, 100, 0], [20, 100, up], *across, [30, 100, 13],
+         [30, 100, 0], [30, 100, up], [30, 100, 50]],
     )  # fmt: skip
-    assert tp.rapid.tolist() == [True, True, False, True, True, False, True, False]
+    rapid = [True, True, True, False, True, *[True] * len(across), True, False, True, False]
+    assert tp.rapid.tolist() == rapid
     np.testing.assert_allclose(tp.feed[~tp.rapid], [250, 250, 500])
-    assert tp.line.tolist() == [5, 7, 7, 7, 8, 8, 8, 10]
+    assert tp.line.tolist() == [5, 7, 7, 7, 7, *[8] * len(across), 8, 8, 8, 10]
 
 
 def test_drill_cycle_inch_classic_and_tilted_axis(tmp_path: Path) -> None:
@@ -1002,15 +1008,25 @@ def test_drill_cycle_inch_classic_and_tilted_axis(tmp_path: Path) -> None:
     tp = cl(tmp_path, text)
     a = np.array([0.6, 0, 0.8])
     top = np.array([25.4, 0, 0])
-    np.testing.assert_allclose(tp.tip[1:], [top + 2.54 * a, top - 12.7 * a, top + 2.54 * a], atol=1e-12)
-    assert tp.feed[2] == pytest.approx(508.0)
+    # from (0,0,2) down to the approach point: across the axis first, then along it
+    approach = top + 2.54 * a
+    across = approach - ((approach - [0, 0, 50.8]) @ a) * a
+    np.testing.assert_allclose(tp.tip[1:], [across, approach, top - 12.7 * a, approach], atol=1e-12)
+    assert tp.feed[3] == pytest.approx(508.0)
 
 
 def test_drill_cycle_on_reuses_last(tmp_path: Path) -> None:
     text = MM + "CYCLE/DRILL,5,MMPM,50,2\nGOTO/0,0,0\nCYCLE/OFF\nGOTO/9,9,9\nCYCLE/ON\nGOTO/1,0,0\nCYCLE/OFF\n"
     tp = cl(tmp_path, text)
-    assert len(tp) == 7
-    np.testing.assert_allclose(tp.tip[4:, 2], [2, -5, 2])
+    np.testing.assert_allclose(tp.tip[tp.line == 8], [[1, 0, 9], [1, 0, 2], [1, 0, -5], [1, 0, 2]])
+
+
+def test_cycle_on_with_a_new_depth_drills_to_it(tmp_path: Path) -> None:
+    text = MM + ("GOTO/0,0,20\nCYCLE/DRILL,RAPTO,3,FEDTO,-10,MMPM,50\nGOTO/0,0,0\nCYCLE/OFF\nGOTO/9,0,20\n"
+                 "CYCLE/ON,FEDTO,-4,RTRCTO,AUTO\nGOTO/9,0,0\nCYCLE/OFF\n")
+    tp = cl(tmp_path, text)
+    np.testing.assert_allclose(tp.tip[tp.line == 5], [[0, 0, 3], [0, 0, -10], [0, 0, 3]])
+    np.testing.assert_allclose(tp.tip[tp.line == 9], [[9, 0, 3], [9, 0, -4], [9, 0, 20]])
 
 
 @pytest.mark.parametrize(

@@ -15,7 +15,7 @@ import re
 import numpy as np
 import pytest
 
-from verne_post.cl.cycles import MAX_PECKS, CycleSpec, cycle_moves, parse_cycle
+from verne_post.cl.cycles import MAX_PECKS, CycleSpec, approach_moves, cycle_moves, parse_cycle, reactivated
 
 
 def raises(message: str):
@@ -238,6 +238,47 @@ def test_safety_invariants(seed: int) -> None:
         prev = h
     assert deepest == pytest.approx(depth, abs=1e-9)
     assert sum(1 for _, k, _ in hs if k == "dwell") == (1 if spec.dwell else 0)
+
+
+@pytest.mark.parametrize("seed", range(300))
+def test_positioning_over_a_hole_never_descends_while_it_travels(seed: int) -> None:
+    # NX's SIM_RAPID_APPROACH: the move along the spindle axis first when it goes up, last when
+    # it goes down; each leg purely along or purely across the axis
+    rng = np.random.default_rng(seed)
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    start, target = rng.uniform(-100, 100, 3), rng.uniform(-100, 100, 3)
+    if seed % 10 == 0:
+        target = start + rng.uniform(-5, 5) * axis  # straight along the axis: one leg
+    points = approach_moves(start, target, axis)
+    np.testing.assert_allclose(points[-1], target, atol=1e-12)
+    legs = np.diff(np.vstack([start, *points]), axis=0)
+    assert len(legs) == (1 if seed % 10 == 0 else 2)
+    for leg in legs:
+        along = leg @ axis
+        assert np.linalg.norm(leg - along * axis) < 1e-9 or abs(along) < 1e-9
+    heights = [float(p @ axis) for p in [start, *points]]
+    if heights[-1] < heights[0]:
+        assert heights[-2] == pytest.approx(heights[0], abs=1e-9)  # travelled at the start's height
+    else:
+        assert heights[1] == pytest.approx(heights[-1], abs=1e-9)  # up first
+
+
+def test_cycle_on_with_changes_replaces_or_adds_values() -> None:
+    # NX: CYCLE/ON,FEDTO,-74.5,... after CYCLE/DRILL,DEEP,...
+    defined = ["DRILL", "DEEP", "STEP", 20.0, "CLEAR", 3.0, "FEDTO", -72.0, "MMPM", 100.0]
+    toks = reactivated(defined, ["FEDTO", -74.5, "RTRCTO", "AUTO"])
+    assert toks == ["DRILL", "DEEP", "STEP", 20.0, "CLEAR", 3.0, "FEDTO", -74.5, "MMPM", 100.0, "RTRCTO", "AUTO"]
+    spec = parse_cycle(toks)
+    assert (spec.depth, spec.retract_auto, spec.pecks) == (74.5, True, (20.0,))
+    with raises("CYCLE/ON: expected keyword,value pairs, got 3.0"):
+        reactivated(defined, [3.0])
+
+
+def test_manual_retract_is_the_retract_value() -> None:
+    # NX Post Builder, mom_cycle_retract_mode: MANUAL is G99, back to the retract value
+    spec = parse_cycle(["DRILL", "RAPTO", 3.0, "FEDTO", -33.0, "RTRCTO", 4.0, "MANUAL", "IPR", 0.25])
+    assert (spec.retract, spec.retract_auto, spec.depth) == (4.0, False, 33.0)
 
 
 TAPPING = "tapping needs the feed synchronised with the spindle, which a joint-space program cannot express"

@@ -1,12 +1,16 @@
 """CYCLE records: drilling cycles read by :mod:`.cycles` and expanded at every GOTO until ``CYCLE/OFF``.
 
-``CYCLE/OFF`` ends the cycle, ``CYCLE/ON`` re-activates the last one, ``CYCLE/INIT`` (SolidWorks
-CAM's marker before the cycle record) is accepted; a tool change also ends a cycle. Each GOTO
-while a cycle is active is the hole's top point; the cycle's moves run along the tool axis and
-its dwells become :class:`~verne_post.toolpath.Dwell` events.
+``CYCLE/OFF`` ends the cycle, ``CYCLE/ON[,keyword,value...]`` re-activates the last one (with those
+values changed), ``CYCLE/INIT`` (SolidWorks CAM's marker before the cycle record) is accepted; a
+tool change also ends a cycle. Each GOTO while a cycle is active is the hole's top point: the tool
+is positioned over it (:func:`.cycles.approach_moves`), then the cycle's moves run along the tool
+axis and its dwells become :class:`~verne_post.toolpath.Dwell` events. ``RTRCTO,AUTO`` returns to
+the level of the tool's position when the cycle was defined or re-activated (G98).
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -28,11 +32,18 @@ def cycle(st: ReaderState, rec: Record) -> None:
     if kind == "INIT":
         return
     no_pending_curve(st, "CYCLE", rec.line)
+    st.cycle_start = st.current_pose("CYCLE", rec.line)[0] if len(st.rows) else None
     if kind == "ON":
         if st.last_cycle is None:
             raise st.fail("CYCLE/ON without a previous CYCLE", rec.line)
-        st.cycle = st.last_cycle
-        return
+        if len(toks) == 1:
+            st.cycle = st.last_cycle
+            return
+        try:
+            toks = cycles.reactivated(st.last_cycle_tokens, toks[1:])
+        except ValueError as error:
+            raise st.fail(str(error), rec.line) from None
+        kind = str(toks[0])
     try:
         spec = cycles.parse_cycle(toks)
     except ValueError as error:
@@ -45,15 +56,25 @@ def cycle(st: ReaderState, rec: Record) -> None:
     else:
         raise st.fail(f"CYCLE/{kind[:20]} has no feed and no per-minute FEDRAT is active", rec.line)
     st.cycle = st.last_cycle = (spec, feed)
+    st.last_cycle_tokens = toks
 
 
 def drill(st: ReaderState, p: list[float], a: tuple[float, float, float], line: int) -> None:
     """One hole: the active cycle's moves from the top point ``p`` (file units) along the axis ``a``."""
     spec, feed = st.cycle
-    st.axis = a
     st.take_rapid()
     axis = np.array(a, dtype=float) / np.linalg.norm(a)
-    for point, kind, seconds in cycles.cycle_moves(spec, np.array(p, dtype=float), axis):
+    top = np.array(p, dtype=float)
+    if spec.retract_auto and st.cycle_start is not None:
+        level = float((st.cycle_start - top) @ axis)
+        if level > spec.retract:
+            spec = replace(spec, retract=level)
+    moves = cycles.cycle_moves(spec, top, axis)
+    if len(st.rows):
+        for point in cycles.approach_moves(st.current_pose("CYCLE", line)[0], moves[0][0], axis)[:-1]:
+            st.add_pose(point, a, line, rapid=True, motion="cycle")
+    st.axis = a
+    for point, kind, seconds in moves:
         if kind == "dwell":
             dwell_event(st, seconds, line)
         else:

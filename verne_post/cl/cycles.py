@@ -50,6 +50,16 @@ Readings chosen
   material, and the previous peck's bottom is material. A Creo ``BACK,g`` sets the back-off.
   (LinuxCNC's G83 uses a fixed 0.010 in instead: rs274ngc ``G83_RAPID_DELTA``.)
 * A dwell (DWELL,t; t = 0 means none) is made once, at the final depth.
+* Positioning over each hole, from wherever the tool is to the approach point, splits into a move
+  across the axis and one along it, the one along it first when it goes up and last when it goes
+  down, as NX's ``SIM_RAPID_APPROACH`` does (and as canned cycles position): never a diagonal
+  rapid that descends while it travels (:func:`approach_moves`).
+* ``RTRCTO,AUTO`` is NX's G98, ``RTRCTO,v,MANUAL`` its G99 (NX Post Builder's MOM variable list,
+  POSTBUILD/app/mom_vars_csv.txt, ``mom_cycle_retract_mode``): AUTO returns to the level the tool
+  was at when the cycle began, if that is higher than the retract (the reader knows that level),
+  MANUAL to the retract value, which is what every other form does.
+* ``CYCLE/ON[,keyword,value...]`` re-activates the last cycle with those values replaced or added
+  (NX: ``CYCLE/ON,FEDTO,-74.5,...`` after ``CYCLE/DRILL,DEEP,...``): :func:`reactivated`.
 * Rejected with a one-line reason: tapping (the feed must follow the spindle, which a
   joint-space program cannot express), boring that stops or orients the spindle, web drilling,
   milling cycles, Creo chip breaking by dwell/revolutions/retract count, peck tables that change
@@ -64,7 +74,8 @@ from typing import Literal
 
 import numpy as np
 
-__all__ = ["MAX_PECKS", "CycleSpec", "Move", "cycle_moves", "parse_cycle", "peck_depths"]
+__all__ = ["MAX_PECKS", "CycleSpec", "Move", "approach_moves", "cycle_moves", "parse_cycle", "peck_depths",
+           "reactivated"]
 
 CycleKind = Literal["drill", "deep", "brkchp", "bore"]
 MoveKind = Literal["rapid", "feed", "dwell"]
@@ -218,6 +229,8 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
                 raise ValueError(f"CYCLE/{name}: {t} given twice")
             seen[t] = _number(i + 1, t)
             i += 2
+        elif t == "MANUAL":  # G99: back to the retract value, as every other form
+            i += 1
         elif t in _WORD_REJECTED:
             raise ValueError(f"CYCLE/{name}: {_WORD_REJECTED[t]}")
         else:
@@ -285,6 +298,38 @@ def _spec(
         dwell=dwell,
         retract_auto=retract_auto,
     )
+
+
+def reactivated(defined: list[float | str], changes: list[float | str]) -> list[float | str]:
+    """The tokens of ``CYCLE/ON,changes`` after the cycle ``defined`` (both without ON): each
+    ``keyword,value`` of ``changes`` replaces that keyword's value in ``defined`` or is added."""
+    out = list(defined)
+    k = 0
+    while k < len(changes):
+        key = changes[k]
+        if not isinstance(key, str) or k + 1 >= len(changes):
+            raise ValueError(f"CYCLE/ON: expected keyword,value pairs, got {','.join(map(str, changes))[:40]}")
+        value = changes[k + 1]
+        at = [j for j in range(1, len(out) - 1) if out[j] == key]
+        if at:
+            out[at[0] + 1] = value
+        else:
+            out += [key, value]
+        k += 2
+    return out
+
+
+def approach_moves(start: np.ndarray, target: np.ndarray, axis: np.ndarray) -> list[np.ndarray]:
+    """Rapid points from ``start`` to ``target`` (CL file units and frame; ``axis`` the unit tool
+    axis): along the axis first if that part goes up, across it first if it goes down (NX's
+    SIM_RAPID_APPROACH), each part left out when it is zero."""
+    move = target - start
+    along = float(move @ axis) * axis
+    across = move - along
+    tiny = 1e-12 * max(1.0, float(np.abs(start).max()), float(np.abs(target).max()))
+    first = across if float(move @ axis) < 0 else along
+    points = [start + first] if float(np.abs(first).max()) > tiny and float(np.abs(move - first).max()) > tiny else []
+    return [*points, target] if float(np.abs(move).max()) > tiny else points
 
 
 def peck_depths(depth: float, pecks: tuple[float, ...]) -> list[float]:

@@ -162,6 +162,8 @@ class ReaderState:
         self.locked_axis_line: int | None = None  # a MULTAX/OFF that left the tool axis undecided (dialects)
         self.cycle: Any = None  # the active drilling cycle, (cycles.CycleSpec, feed mm/min), or None
         self.last_cycle: Any = None
+        self.last_cycle_tokens: list[Any] = []  # the record that defined last_cycle, for CYCLE/ON changes
+        self.cycle_start: np.ndarray | None = None  # the tool tip when the cycle began (RTRCTO,AUTO)
         self.curve: Any = None  # a CIRCLE/MOVARC waiting for its end GOTO, or a NURBS being read
         self.skip_goto: np.ndarray | None = None  # a GOTO repeating this point (a spline's end) adds nothing
         self.home: tuple[int, np.ndarray, np.ndarray] | None = None  # FROM pose: (frame id, tip, axis) in it
