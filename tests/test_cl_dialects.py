@@ -147,6 +147,32 @@ def test_creo_inverse_time_auto_keeps_the_programmed_feed(tmp_path: Path) -> Non
     assert tp.warnings == () and not tp.inverse_time.any()
 
 
+def test_nx_origin_is_setup_information_not_a_frame(tmp_path: Path) -> None:
+    # NX Post Builder, mom_origin: "the distance from the origin of the MCS to the center of the
+    # rotary table"; the GOTO data stay in the MCS
+    tp = read(tmp_path, NX_HEAD + "ORIGIN/10,20,30\nGOTO/10,0,0\n")
+    np.testing.assert_allclose(tp.tip, [[10, 0, 0]])
+    assert len(tp.warnings) == 1 and "ORIGIN read as Siemens NX CLSF's setup information" in tp.warnings[0]
+    moved = read(tmp_path, APT_HEAD + "ORIGIN/10,20,30\nGOTO/10,0,0\n", frame="apply")  # a frame elsewhere
+    np.testing.assert_allclose(moved.tip, [[20, 20, 30]])
+
+
+def test_nx_gohome_with_its_own_point_and_dwell_in_revolutions(tmp_path: Path) -> None:
+    # NX Post Builder: mom_gohome_pos (GOHOME's own point), mom_delay_revs (a dwell in revolutions)
+    text = NX_HEAD + "SPINDL/RPM,1200,CLW\nGOTO/10,0,0\nDELAY/REV,6\nDELAY/2.5\nGOHOME/50,50,200\n"
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[10, 0, 0], [50, 50, 200]])
+    assert tp.rapid.tolist() == [False, True]
+    assert [e.seconds for e in tp.events if isinstance(e, Dwell)] == pytest.approx([0.3, 2.5])
+    e = refused(tmp_path, NX_HEAD + "GOTO/10,0,0\nDELAY/REV,6\n")
+    assert e.line == 6 and "needs a spindle speed" in e.reason
+
+
+def test_length_compensation_is_not_cutter_compensation(tmp_path: Path) -> None:
+    tp = read(tmp_path, APT_HEAD + "CUTCOM/ON,LENGTH,3\nGOTO/10,0,0\n")
+    assert tp.warnings == ()
+
+
 def test_arc_direction_override(tmp_path: Path) -> None:
     tp = read(tmp_path, quarter(NX_HEAD), arc_direction="ccw")
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)

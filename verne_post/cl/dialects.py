@@ -33,6 +33,10 @@ Conventions
 ``centre_line``: the CL points are the tool centre (True), tool contact points (False) or
 not said (None); cutter compensation records are only acceptable on centre-line data.
 
+``origin_is_frame``: ``ORIGIN/x,y,z`` is a frame record (True), or, in NX, the setup information
+of its Origin UDE, "the distance from the origin of the MCS to the center of the rotary table"
+(NX Post Builder's MOM variable list, ``mom_origin``), which leaves the GOTO data where they are.
+
 ``locked_axis``: the tool axis of the 3-number GOTOs after ``MULTAX/OFF``:
 
 - ``"last"``: the axis of the last position before it. CATIA / DELMIA "APT Format: Syntax of
@@ -67,6 +71,7 @@ class Dialect:
     frames: FrameMode
     centre_line: bool | None = None
     locked_axis: Literal["last", "z"] | None = None
+    origin_is_frame: bool = True
 
     def describe(self, resolved: ArcDirection) -> str:
         """One line for the user: the dialect and the conventions applied (``resolved``: the arc direction used)."""
@@ -83,7 +88,7 @@ class Dialect:
 
 
 DIALECTS: dict[str, Dialect] = {
-    "nx": Dialect("Siemens NX CLSF", "cw", "local"),
+    "nx": Dialect("Siemens NX CLSF", "cw", "local", origin_is_frame=False),
     "makino": Dialect("Makino FF CAM APT-CL", "cw", "local"),
     "creo": Dialect("PTC Creo / Pro/CLfile", "ccw", "world"),
     "solidworks": Dialect("SolidWorks CAM APT", "ccw", "world"),

@@ -74,6 +74,10 @@ def origin(st: ReaderState, rec: Record) -> None:
     """``ORIGIN/x,y,z`` or, as CATIA documents its NC axis ("APT Format: Syntaxes Interpreted by
     APT Import"), ``ORIGIN/x,y,z,xx,xy,xz,zx,zy,zz``: the origin, X axis and Z axis (Y = Z x X)."""
     v = st.numbers(rec.args, "ORIGIN", rec.line)
+    if not st.dialect.origin_is_frame:
+        st.warn(rec.line, f"ORIGIN read as {st.dialect.name}'s setup information (where the rotary table sits), "
+                "not a frame: the data after it are not moved", kind="ORIGIN")
+        return
     if len(v) == 3:
         _make_frame(st, v, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], None, "ORIGIN", rec.line)
     elif len(v) == 9:

@@ -173,16 +173,25 @@ def dwell_event(st: ReaderState, seconds: float, line: int) -> None:
 
 
 def delay(st: ReaderState, rec: Record) -> None:
-    nums = [t for t in st.tokens(rec.args, "DELAY", rec.line) if isinstance(t, float)]
-    if len(nums) != 1:
-        raise st.fail("DELAY needs one time in seconds", rec.line)
-    dwell_event(st, nums[0], rec.line)
+    """DELAY/s (seconds), or DELAY/REV,n: n spindle revolutions (NX's dwell UDE in revolutions, NX
+    Post Builder's ``mom_delay_revs``), at the programmed spindle speed."""
+    toks = st.tokens(rec.args, "DELAY", rec.line)
+    nums = [t for t in toks if isinstance(t, float)]
+    words = [t for t in toks if isinstance(t, str)]
+    if len(nums) != 1 or words not in ([], ["REV"]):
+        raise st.fail("DELAY needs one time in seconds (or REV,n revolutions)", rec.line)
+    if words:
+        if not st.spindle_on or st.rpm is None:
+            raise st.fail("DELAY/REV (a dwell in spindle revolutions) needs a spindle speed (SPINDL)", rec.line)
+        dwell_event(st, nums[0] * 60.0 / st.rpm, rec.line)
+    else:
+        dwell_event(st, nums[0], rec.line)
 
 
 def cutcom(st: ReaderState, rec: Record) -> None:
     words = [t for t in st.tokens(rec.args, "CUTCOM", rec.line) if isinstance(t, str)]
-    if not words or words[0] == "OFF":
-        return
+    if not words or words[0] == "OFF" or "LENGTH" in words:
+        return  # CUTCOM/ON,LENGTH,h: tool length compensation, which the tool data already give here
     if st.dialect.centre_line is False:
         raise st.fail(f"CUTCOM/{rec.args.strip()[:40]}: cutter compensation on tool contact-point data cannot be "
                       "postprocessed into a joint-space program; output tool centre-line CL data", rec.line)

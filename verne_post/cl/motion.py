@@ -88,7 +88,15 @@ def from_(st: ReaderState, rec: Record) -> None:
 
 
 def gohome(st: ReaderState, rec: Record) -> None:
+    """GOHOME: a rapid to the FROM position; GOHOME/x,y,z[,i,j,k] to that point (NX's GOHOME UDE
+    has its own point: NX Post Builder's ``mom_gohome_pos``)."""
     curves.no_pending_curve(st, "GOHOME", rec.line)
+    if rec.args.strip():
+        p, a = point_axis(st, rec.args, "GOHOME", rec.line)
+        st.axis = a
+        st.take_rapid()
+        st.add_pose(p, a, rec.line, rapid=True)
+        return
     if st.home is None:
         raise st.fail("GOHOME without a FROM position", rec.line)
     frame, tip, axis = st.home
