@@ -250,6 +250,29 @@ def test_movarc_angle(tmp_path: Path) -> None:
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(2.5 * math.pi)
 
 
+def test_movarc_angle_that_fits_neither_way_is_refused(tmp_path: Path) -> None:
+    text = "$$ HSMWorks\n" + APT_HEAD + "GOTO/10,0,0\nMOVARC/0,0,0,0,0,1,10,ANGLE,45\nGOTO/0,10,0\n"
+    e = refused(tmp_path, text)
+    assert e.line == 5 and "MOVARC ANGLE 45 does not fit" in e.reason
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_movarc_direction_is_the_one_its_angle_fits(tmp_path: Path, seed: int) -> None:
+    # Autodesk's 2021 APT posts turn the normal for clockwise arcs; the 2011 HSMWorks ones did not,
+    # leaving the direction in the (positive) ANGLE alone. Either way the arc is the one of that sweep.
+    rng = np.random.default_rng(seed)
+    sweep = rng.uniform(5, 355) if seed % 8 else rng.uniform(365, 700)
+    clockwise, flipped = bool(seed % 2), bool(seed % 4 > 1)
+    phi = math.radians(sweep) * (-1 if clockwise else 1)
+    end = [10 * math.cos(phi), 10 * math.sin(phi), -3.0]
+    normal = "0,0,-1" if clockwise and flipped else "0,0,1"
+    text = ("$$ HSMWorks\n" + APT_HEAD + "GOTO/10,0,0\n"
+            f"MOVARC/0,0,0,{normal},10,ANGLE,{sweep:.6f}\nGOTO/{end[0]:.9f},{end[1]:.9f},{end[2]}\n")
+    tp = read(tmp_path, text)
+    expected = math.radians(sweep) * (-1 if clockwise else 1)
+    assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(expected, abs=1e-6)
+
+
 # --------------------------------------------------------------------------- frames
 
 

@@ -142,9 +142,8 @@ def end_curve(st: ReaderState, p_end: list[float], a_end: tuple[float, float, fl
     direction = st.arc_direction
     closed_tol = max(1e-4 / st.scale, 1e-9 * r)
     sweep = arc_sweep(c, n, p0, p1, direction, spec.turns, closed_tol)
-    if spec.sweep_deg is not None:  # MOVARC: whole turns from the given angle
-        extra = round((math.radians(spec.sweep_deg) - sweep) / (2 * math.pi))
-        sweep += 2 * math.pi * max(0, extra)
+    if spec.sweep_deg is not None:
+        direction, sweep = _movarc_sweep(st, spec, p0, p1, r, closed_tol, tol_r)
     a1 = np.array(a_end, dtype=float)
     a1 /= np.linalg.norm(a1)
     omega = math.acos(max(-1.0, min(1.0, float(a0 @ a1))))
@@ -163,8 +162,27 @@ def end_curve(st: ReaderState, p_end: list[float], a_end: tuple[float, float, fl
     st.add_poses(points[:-1], axes[:-1], line, rapid, "arc")
     st.axis = a_end
     st.add_pose(p_end, a_end, line, rapid, motion="arc")
-    st.arcs.append(Arc(start, len(st.rows) - 1, c, n, spec.line))
+    if spec.sweep_deg is None:  # a MOVARC's direction is its own, not the file's
+        st.arcs.append(Arc(start, len(st.rows) - 1, c, n, spec.line))
     st.last_arc = (spec, len(st.rows))
+
+
+def _movarc_sweep(st: ReaderState, spec: PendingArc, p0: np.ndarray, p1: np.ndarray, r: float, closed_tol: float,
+                  tol_r: float) -> tuple[str, float]:
+    """(direction, sweep in rad) of a MOVARC: the way round whose sweep from start to end, plus
+    whole turns, is its ANGLE. Autodesk's 2011 HSMWorks APT posts wrote the plane normal without
+    turning it for clockwise arcs, so the normal alone does not give the direction; the ANGLE (the
+    swept angle, positive) does. The file's direction is preferred where both fit (half turns)."""
+    target = math.radians(spec.sweep_deg or 0.0)
+    tol = max(math.radians(0.05), 2.0 * tol_r / r)
+    other = "cw" if st.arc_direction == "ccw" else "ccw"
+    for direction in (st.arc_direction, other):
+        sweep = arc_sweep(spec.centre, spec.axis, p0, p1, direction, 1, closed_tol)
+        sweep += 2 * math.pi * max(0, round((target - sweep) / (2 * math.pi)))
+        if abs(sweep - target) <= tol:
+            return direction, sweep
+    raise st.fail(f"MOVARC ANGLE {spec.sweep_deg:g} does not fit the arc from its start to its end either way round",
+                  spec.line)
 
 
 def continue_arc(st: ReaderState) -> None:
