@@ -173,6 +173,25 @@ def test_length_compensation_is_not_cutter_compensation(tmp_path: Path) -> None:
     assert tp.warnings == ()
 
 
+AUTODESK_HEAD = "MACHIN/HAAS\nMODE/MILL\nPARTNO/'1001'\nPPRINT/'1001'\nUNITS/MM\nMULTAX/OFF\n"  # 6 lines
+
+
+def test_autodesk_positional_cycle_point_is_the_hole_bottom(tmp_path: Path) -> None:
+    # Autodesk's Common ISO 4343 APT post: onCycle writes CYCLE/DRILL, d, MMPM, f, c, RAPTO, r with
+    # c = cycle.clearance (a height) and r = c - cycle.retract; onCyclePoint the hole bottom.
+    # Hole tops Z0 and Z-2, bottoms 10 below; clearance plane Z15, retract plane Z5 for both.
+    text = AUTODESK_HEAD + ("RAPID\nGOTO/20.0, 0.0, 15.0\nCYCLE/DRILL, 10.0, MMPM, 100.0, 15.0, RAPTO, 10.0\n"
+                            "FEDRAT/100.0, MMPM\nGOTO/20.0, 0.0, -10.0\nFEDRAT/100.0, MMPM\nGOTO/40.0, 0.0, -12.0\n"
+                            "CYCLE/OFF\n")
+    tp = read(tmp_path, text)
+    assert "Autodesk" in tp.dialect
+    np.testing.assert_allclose(tp.tip[tp.line == 11], [[20, 0, 5], [20, 0, -10], [20, 0, 15]])
+    np.testing.assert_allclose(tp.tip[tp.line == 13], [[40, 0, 15], [40, 0, 5], [40, 0, -12], [40, 0, 15]])
+    # the same record elsewhere is classic APT: the GOTO is the top, 15 the clearance above it
+    classic = read(tmp_path, APT_HEAD + "GOTO/20,0,40\nCYCLE/DRILL,10,MMPM,100,15\nGOTO/20,0,0\nCYCLE/OFF\n")
+    np.testing.assert_allclose(classic.tip[classic.line == 5], [[20, 0, 15], [20, 0, -10], [20, 0, 15]])
+
+
 def test_arc_direction_override(tmp_path: Path) -> None:
     tp = read(tmp_path, quarter(NX_HEAD), arc_direction="ccw")
     assert swept(tp, np.zeros(3), np.array([0, 0, 1.0]), np.ones(len(tp), bool)) == pytest.approx(0.5 * math.pi)

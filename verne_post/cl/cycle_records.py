@@ -69,6 +69,8 @@ def drill(st: ReaderState, p: list[float], a: tuple[float, float, float], line: 
         level = float((st.cycle_start - top) @ axis)
         if level > spec.retract:
             spec = replace(spec, retract=level)
+    if spec.positional and st.dialect.cycle_point == "bottom":
+        spec, top = _from_bottom(st, spec, top, axis, line)
     moves = cycles.cycle_moves(spec, top, axis)
     if len(st.rows):
         for point in cycles.approach_moves(st.current_pose("CYCLE", line)[0], moves[0][0], axis)[:-1]:
@@ -79,6 +81,20 @@ def drill(st: ReaderState, p: list[float], a: tuple[float, float, float], line: 
             dwell_event(st, seconds, line)
         else:
             st.add_pose(point, a, line, rapid=kind == "rapid", feed=feed, motion="cycle")
+
+
+def _from_bottom(st: ReaderState, spec: cycles.CycleSpec, bottom: np.ndarray, axis: np.ndarray, line: int
+                 ) -> tuple[cycles.CycleSpec, np.ndarray]:
+    """Autodesk's positional cycle (module :mod:`.dialects`, ``cycle_point``): the GOTO is the
+    hole bottom, the clearance an absolute height along the axis and RAPTO its distance down to
+    the retract plane; as the hole top and heights above it (file units)."""
+    top = bottom + spec.depth * axis
+    clearance = (spec.clear or 0.0) - float(top @ axis)
+    approach = clearance - (spec.rapto or 0.0)
+    if approach < 0:
+        raise st.fail(f"CYCLE: the retract plane ({approach:g} from the hole top, as {st.dialect.name} writes the "
+                      "clearance height and RAPTO) is below the hole top", line)
+    return replace(spec, approach=approach, retract=max(clearance, approach)), top
 
 
 HANDLERS = {"CYCLE": cycle}

@@ -33,9 +33,11 @@ Sources, per CAM family
   ``CYCLE/DEEP2,FEDTO,10.1,1STPECK,5.,SUBPECK,2.,MMPM,1097.28,RAPTO,3.,RTRCTO,10.`` (FEDTO
   positive). No documentation was found; DEEP2 is read as a full-retract peck cycle whose first
   peck is 1STPECK and every later one SUBPECK.
-* Classic positional APT, as Autodesk's generic APT post (apt.cps) writes it:
-  ``CYCLE/DRILL, d, IPM, f, c [, RAPTO, r] [, DWELL, q]``, ``CYCLE/DEEP, d, INCR, i, IPM, f, c``
-  (depth first, clearance after the feed).
+* Classic positional APT: ``CYCLE/DRILL, d, IPM, f, c [, RAPTO, r] [, DWELL, q]``,
+  ``CYCLE/DEEP, d, INCR, i, IPM, f, c`` (depth first, clearance after the feed), read with the
+  GOTO the hole top and c above it. Autodesk's "Common ISO 4343 APT" posts write the same shape
+  with the GOTO the hole bottom and c an absolute height (``cycle_point`` in :mod:`.dialects`;
+  the reader converts, this module sees only the hole top and heights above it).
 
 Readings chosen
 ---------------
@@ -69,7 +71,7 @@ Readings chosen
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
@@ -142,6 +144,9 @@ class CycleSpec:
     chip_break: float | None = None
     dwell: float = 0.0
     retract_auto: bool = False
+    positional: bool = False  # classic APT order, the depth first (see cycle_records for its two readings)
+    clear: float | None = None  # the record's CLEAR value (or the classic form's clearance)
+    rapto: float | None = None  # the record's RAPTO value
 
 
 def parse_cycle(toks: list[float | str]) -> CycleSpec:
@@ -174,6 +179,7 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
     steps: list[float] = []
     feed: tuple[float, str | None] | None = None
     retract_auto = False
+    positional = False
 
     def _number(j: int, key: str) -> float:
         if j >= len(toks) or isinstance(toks[j], str):
@@ -194,6 +200,7 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
         if not isinstance(t, str):
             if i == first_arg:
                 seen["DEPTH"] = _number(i, "depth")  # classic APT: the depth comes first
+                positional = True
                 i += 1
             elif i + 1 < len(toks) and toks[i + 1] in _FEED_WORDS:
                 set_feed(_number(i, "feed"), str(toks[i + 1]))  # value before its unit word
@@ -235,7 +242,8 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
             raise ValueError(f"CYCLE/{name}: {_WORD_REJECTED[t]}")
         else:
             raise ValueError(f"CYCLE/{name}: unknown word '{t}'")
-    return _spec(kind, name, seen, steps, feed, retract_auto)
+    return replace(_spec(kind, name, seen, steps, feed, retract_auto), positional=positional,
+                   clear=seen.get("CLEAR"), rapto=seen.get("RAPTO"))
 
 
 def _spec(

@@ -37,6 +37,15 @@ not said (None); cutter compensation records are only acceptable on centre-line 
 of its Origin UDE, "the distance from the origin of the MCS to the center of the rotary table"
 (NX Post Builder's MOM variable list, ``mom_origin``), which leaves the GOTO data where they are.
 
+``cycle_point``: what the GOTO of a cycle in the classic positional form
+``CYCLE/DRILL,d,unit,f,c[,RAPTO,r]`` is:
+
+- ``"top"``: the hole top, c the clearance above it (classic APT, as Creo's fixed cycle format
+  and Surfcam's generic post describe it);
+- ``"bottom"``: the hole bottom, c the clearance plane's height and r its distance down to the
+  retract plane: Autodesk's "Common ISO 4343 APT" posts write the cycle point onCyclePoint gets
+  (the hole bottom) and ``c = cycle.clearance``, ``r = c - cycle.retract``.
+
 ``locked_axis``: the tool axis of the 3-number GOTOs after ``MULTAX/OFF``:
 
 - ``"last"``: the axis of the last position before it. CATIA / DELMIA "APT Format: Syntax of
@@ -72,6 +81,7 @@ class Dialect:
     centre_line: bool | None = None
     locked_axis: Literal["last", "z"] | None = None
     origin_is_frame: bool = True
+    cycle_point: Literal["top", "bottom"] = "top"
 
     def describe(self, resolved: ArcDirection) -> str:
         """One line for the user: the dialect and the conventions applied (``resolved``: the arc direction used)."""
@@ -93,7 +103,7 @@ DIALECTS: dict[str, Dialect] = {
     "creo": Dialect("PTC Creo / Pro/CLfile", "ccw", "world"),
     "solidworks": Dialect("SolidWorks CAM APT", "ccw", "world"),
     "catia": Dialect("CATIA APT", None, "local", locked_axis="last"),
-    "fusion": Dialect("Autodesk Fusion / HSM APT", None, "local", locked_axis="z"),
+    "fusion": Dialect("Autodesk Fusion / HSM APT", None, "local", locked_axis="z", cycle_point="bottom"),
     "apt": Dialect("generic APT", None, "local"),
 }
 
@@ -103,7 +113,9 @@ _SIGNATURES: tuple[tuple[str, re.Pattern[str]], ...] = (
     ("makino", re.compile(r"APTCL-SPEC\s*,\s*MAKINO", re.I)),
     ("solidworks", re.compile(r"^\s*(?:CSI_SET_\w*\s*/|TRNTYP\s*/)|SOLIDWORKS|CAMWORKS", re.I | re.M)),
     ("catia", re.compile(r"^\s*\$\$\*?\s*CATIA", re.I | re.M)),
-    ("fusion", re.compile(r"^\s*MOVARC\s*/|HSMWorks|Autodesk|Fusion 360", re.I | re.M)),
+    # Autodesk's ISO 4343 APT posts open with [MACHIN/id,] MODE/MILL|TURN, PARTNO/'name'
+    ("fusion", re.compile(r"^\s*MOVARC\s*/|HSMWorks|Autodesk|Fusion 360|"
+                          r"^\s*MODE\s*/\s*(?:MILL|TURN)\s*\n\s*PARTNO\s*/\s*'", re.I | re.M)),
     ("nx", re.compile(r"^\s*TOOL PATH\s*/|^\s*\$\$ (?:centerline|contact|tool tip) data|Tool Path Listing has|"
                       r"Information listing created by", re.I | re.M)),
 )  # fmt: skip
