@@ -910,7 +910,7 @@ def test_tracut_is_read_as_information_with_a_warning(tmp_path: Path) -> None:
     ("record", "message"),
     [("TRANS/1,2,3", "TRANS"), ("GOFWD/S1", "GOFWD"), ("INDEX/1", "INDEX"), ("MOVE/1,2,3", "MOVE"),
      ("CONT/1,2,3", "CONT"), ("TLON,GOTO/1,2,3", "TLON,GOTO"), ("ARC/0,0,0,0,0,1,5,5,0,0", "ARC"),
-     ("ROTATE/AAXIS,ABSOL,90,CLW", "ROTATE")],
+     ("ROTATE/AAXIS,ABSOL,90,CLW", "ROTATE"), ("MCS/1,0,0,0,1,0,0,0,1,0,0,0", "MCS (a work-plane frame")],
 )
 def test_geometry_changing_records_rejected(tmp_path: Path, record: str, message: str) -> None:
     e = err(tmp_path, MM + record + "\nGOTO/0,0,0\n")

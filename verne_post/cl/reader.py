@@ -85,6 +85,9 @@ _IGNORED_PREFIXES = ("CSI_SET_",)
 _REJECTED = {
     "TRANS": "TRANS (coordinate transformation) is not supported; output the CL data in one MSYS",
     "REFSYS": "REFSYS (reference system) is not supported; use MSYS",
+    # Autodesk's CAMplete and Mori APT posts: each section's work-plane frame, the GOTOs in it
+    **{w: f"{w} (a work-plane frame for the data after it) is not supported: output the CL data in one frame"
+       for w in ("MCS", "MCSYS")},
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     **{w: f"{w} (a rotary axis moved by the CL data) is not supported: give 5-axis tool axes in GOTO records"
