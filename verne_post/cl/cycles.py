@@ -85,7 +85,7 @@ Move = tuple[np.ndarray, MoveKind, float]
 
 MAX_PECKS = 10_000  # a hole needing more pecks than this is refused (bounded output)
 
-_FEED_WORDS = {"MMPM", "IPM", "MMPR", "IPR"}
+_FEED_WORDS = {"MMPM", "IPM", "MMPR", "IPR", "PERMIN", "PERREV"}  # PER...: file units, as FEDRAT reads them
 _TYPES: dict[str, CycleKind] = {
     "DRILL": "drill",
     "FACE": "drill",  # Creo: drill with an optional dwell at the bottom

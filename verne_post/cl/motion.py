@@ -97,8 +97,11 @@ def gohome(st: ReaderState, rec: Record) -> None:
         st.take_rapid()
         st.add_pose(p, a, rec.line, rapid=True)
         return
-    if st.home is None:
-        raise st.fail("GOHOME without a FROM position", rec.line)
+    if st.home is None:  # the machine's home: fine as the program's last motion (Autodesk's posts end so)
+        st.warn(rec.line, "GOHOME without a FROM position: the machine's home is not known here, so the program "
+                "ends at its last motion before it")
+        st.homeless = rec.line
+        return
     frame, tip, axis = st.home
     p, a = st.from_part(*st.to_part(tip, axis, frame))
     st.axis = (float(a[0]), float(a[1]), float(a[2]))

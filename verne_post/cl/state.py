@@ -168,6 +168,7 @@ class ReaderState:
         self.skip_goto: np.ndarray | None = None  # a GOTO repeating this point (a spline's end) adds nothing
         self.home: tuple[int, np.ndarray, np.ndarray] | None = None  # FROM pose: (frame id, tip, axis) in it
         self.clearance: Clearance | None = None  # the surface RETRCT withdraws to
+        self.homeless: int | None = None  # the line of a GOHOME with no FROM: only the program's end may follow
         self.indirv: tuple[np.ndarray, int, int] | None = None  # INDIRV: (unit direction, pose count, line)
         self.last_arc: Any = None  # (curves.PendingArc, pose count) of the arc the last GOTO ended
         self.part_name: str | None = None
@@ -234,6 +235,7 @@ class ReaderState:
             and self.skip_goto is None
             and (self.tools is None or not self.tools.open)
             and self.multax is not False
+            and self.homeless is None
         )
 
     def push_state(self) -> None:
@@ -249,6 +251,9 @@ class ReaderState:
 
     def add_pose(self, p: list[float] | np.ndarray, a: tuple[float, ...] | np.ndarray, line: int, rapid: bool,
                  feed: float | None = None, motion: str = "feed") -> None:
+        if self.homeless is not None:
+            raise self.fail("GOHOME without a FROM position (the machine's home is not known here), and motion "
+                            "after it", self.homeless)
         if self.tools is not None and self.tools.open:
             self.tools.close(self)
         if not rapid and feed is None and self.feed_val != self.feed_val:
