@@ -275,9 +275,7 @@ def gofwd(st: ReaderState, rec: Record) -> None:
         raise st.fail("GOFWD check LINE does not cross the circle", rec.line)
     phi0, half = math.atan2(normal[1], normal[0]), math.acos(max(-1.0, min(1.0, h)))
     small = max(1e-4 / st.scale, 1e-9 * r) / r  # the start itself on the line is not its end
-    found = sorted({(phi0 + sign * half) % (2 * math.pi) for sign in (1, -1)})
-    found = [x if x > small else x + 2 * math.pi for x in found]
-    found.sort()
+    found = sorted(x if x > small else x + 2 * math.pi for x in {(phi0 + s * half) % (2 * math.pi) for s in (1, -1)})
     sweep = found[(crossing - 1) % len(found)] + 2 * math.pi * ((crossing - 1) // len(found))
     height = float((p0 - c) @ n) * n
     p1 = c + height + r * (math.cos(sweep) * u + math.sin(sweep) * w)
