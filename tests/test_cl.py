@@ -740,6 +740,18 @@ def test_gofwd_that_cannot_be_honoured_is_refused(tmp_path: Path, records: str, 
     assert e.line == 5 and message in e.reason
 
 
+@pytest.mark.parametrize("side", [1, -1])
+def test_gofwd_to_a_rounded_tangent_exit_line_ends_at_the_tangent_point(tmp_path: Path, side: int) -> None:
+    # the exit line tangent at 135 degrees on either side of the centre, its points rounded to 5
+    # decimals (as CATIA prints): one crossing, at the tangent point, not two rounding apart
+    e = np.array([math.cos(math.radians(135)), math.sin(math.radians(135))]) * 10
+    t = np.array([-e[1], e[0]]) / 10
+    a, b = (e + 3 * t) * side, (e - 4 * t) * side
+    line = f"{a[0]:.5f},{a[1]:.5f},0,{b[0]:.5f},{b[1]:.5f},0"
+    tp = cl(tmp_path, MM + f"GOTO/10,0,0\nINDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/{line})\n")
+    np.testing.assert_allclose(tp.tip[-1, :2], e * side, atol=1e-5)
+
+
 def test_gofwd_without_indirv_goes_on_the_way_it_was_going(tmp_path: Path) -> None:
     # APT: no INDIRV, the motion keeps the direction of the move before it (here +Y at (10, 0))
     tp = cl(tmp_path, MM + "GOTO/10,-5,0\nGOTO/10,0,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,0,1,0)\n")

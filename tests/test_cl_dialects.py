@@ -16,7 +16,7 @@ import pytest
 
 from verne_post.cl import read_cl
 from verne_post.errors import InputError
-from verne_post.toolpath import MOTION_KINDS, Dwell, Toolpath
+from verne_post.toolpath import MOTION_KINDS, Coolant, Dwell, Toolpath
 
 SAMPLES = Path(__file__).resolve().parent / "data" / "cl-samples"
 NX_ZLEVEL = SAMPLES / "nx_zlevel_coremill_mm.cls"
@@ -190,6 +190,23 @@ def test_autodesk_positional_cycle_point_is_the_hole_bottom(tmp_path: Path) -> N
     # the same record elsewhere is classic APT: the GOTO is the top, 15 the clearance above it
     classic = read(tmp_path, APT_HEAD + "GOTO/20,0,40\nCYCLE/DRILL,10,MMPM,100,15\nGOTO/20,0,0\nCYCLE/OFF\n")
     np.testing.assert_allclose(classic.tip[classic.line == 5], [[20, 0, 15], [20, 0, -10], [20, 0, 15]])
+
+
+def test_creo_records_as_its_supported_cl_data_commands_define_them(tmp_path: Path) -> None:
+    # PTC Creo help, "Supported CL Data Commands" and "CL Output for Holemaking Cycles":
+    # FEDRAT units FPM/FPR (feet), COOLNT / type, pressure; CYCLE ... RETURN, 0 "retract to the
+    # retract plane"; HEAD for multiple turrets
+    text = CREO_HEAD + ("GOTO / 0, 0, 40\nCOOLNT / FLOOD, HIGH\nFEDRAT / 2, FPM\nGOTO / 0, 0, 30\n"
+                        "CYCLE / DRILL, DEPTH, 5, MMPM, 80, CLEAR, 2, RETURN, 0\nGOTO / 10, 0, 0\nGOTO / 20, 0, 0\n"
+                        "CYCLE / OFF\nHEAD / 1\nHEAD / OFF\n")
+    tp = read(tmp_path, text)
+    assert tp.warnings == ()
+    assert [e.mode for e in tp.events if isinstance(e, Coolant)] == ["FLOOD"]
+    assert tp.feed[1] == pytest.approx(2 * 304.8)
+    np.testing.assert_allclose(tp.tip[tp.line == 9], [[10, 0, 30], [10, 0, 2], [10, 0, -5], [10, 0, 30]])
+    for head in ("HEAD / BOTH", "HEAD / 2, OPTION, 1"):
+        e = refused(tmp_path, CREO_HEAD + f"GOTO / 0, 0, 40\n{head}\nGOTO / 1, 0, 40\n")
+        assert e.line == 5 and "one spindle" in e.reason
 
 
 def test_arc_direction_override(tmp_path: Path) -> None:

@@ -271,9 +271,12 @@ def gofwd(st: ReaderState, rec: Record) -> None:
         raise st.fail("GOFWD check LINE has two coincident points in the plane of the circle", rec.line)
     normal = np.array([-along[1], along[0]]) / length
     h = float(normal @ a2[0]) / r
-    if abs(h) > 1.0 + 1e-9:
+    touch = max(1e-3 / st.scale, 1e-5 * r) / r  # a line within 1 um of tangent is the tangent, as printed
+    if abs(h) > 1.0 + touch:
         raise st.fail("GOFWD check LINE does not cross the circle", rec.line)
     phi0, half = math.atan2(normal[1], normal[0]), math.acos(max(-1.0, min(1.0, h)))
+    if abs(h) > 1.0 - touch:  # its two crossings are one, the tangent point, which rounding alone would split
+        half = 0.0 if h > 0 else math.pi
     small = max(1e-4 / st.scale, 1e-9 * r) / r  # the start itself on the line is not its end
     found = sorted(x if x > small else x + 2 * math.pi for x in {(phi0 + s * half) % (2 * math.pi) for s in (1, -1)})
     sweep = found[(crossing - 1) % len(found)] + 2 * math.pi * ((crossing - 1) // len(found))

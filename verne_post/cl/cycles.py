@@ -47,6 +47,8 @@ Readings chosen
   lower, so it can only feed more air, not rapid into material.
 * Peck depths: STEP/INCR values (or 1STPECK, SUBPECK) in order, the last one repeated, until
   the total depth; the final peck is whatever remains (10.1 deep, 5 then 2: 5, 7, 9, 10.1).
+* Creo's ``RETURN, 0`` means "retract to the retract plane" (PTC Creo help, "CL Output for
+  Holemaking Cycles"), the plane the tool came from: read as ``RTRCTO,AUTO``.
 * Re-entry clearance between pecks and the chip-break back-off both equal the approach
   distance, as NX's simulated cycles do; the CAM declared that distance safe to rapid to above
   material, and the previous peck's bottom is material. A Creo ``BACK,g`` sets the back-off.
@@ -85,7 +87,7 @@ Move = tuple[np.ndarray, MoveKind, float]
 
 MAX_PECKS = 10_000  # a hole needing more pecks than this is refused (bounded output)
 
-_FEED_WORDS = {"MMPM", "IPM", "MMPR", "IPR", "PERMIN", "PERREV"}  # PER...: file units, as FEDRAT reads them
+_FEED_WORDS = {"MMPM", "IPM", "FPM", "MMPR", "IPR", "FPR", "PERMIN", "PERREV"}  # as FEDRAT reads them
 _TYPES: dict[str, CycleKind] = {
     "DRILL": "drill",
     "FACE": "drill",  # Creo: drill with an optional dwell at the bottom
@@ -271,6 +273,8 @@ def _spec(
         raise ValueError(f"CYCLE/{name} has no clearance: give CLEAR,c or RAPTO,r")
     approach = seen.get("RAPTO", seen.get("CLEAR", 0.0))
     retract = max(seen.get(key, 0.0) for key in ("CLEAR", "RAPTO", "RTRCTO", "RETURN"))
+    if seen.get("RETURN") == 0.0:  # Creo's PULLOUT_DIST: "If programmed at 0, retract to the retract plane"
+        retract_auto = True
     if feed is not None and feed[0] <= 0:
         raise ValueError(f"CYCLE/{name} feed must be positive, got {feed[0]:g}")
 

@@ -25,8 +25,10 @@ from .state import MM_PER_INCH, UNIT_WORDS, ReaderState
 MAX_FEED = 1e7
 MAX_RPM = 1e6
 MAX_DWELL = 1e5  # s
-_PER_MINUTE: dict[str, float | None] = {"MMPM": 1.0, "IPM": MM_PER_INCH, "PERMIN": None}  # None: file units
-_PER_REV: dict[str, float | None] = {"MMPR": 1.0, "IPR": MM_PER_INCH, "PERREV": None}
+# mm per unit of each feed word; None: the file's units. FPM / FPR (feet): Creo's FEDRAT units
+# (PTC Creo help, "Supported CL Data Commands": FPM, IPM, FPR, IPR, MMPM, MMPR).
+_PER_MINUTE: dict[str, float | None] = {"MMPM": 1.0, "IPM": MM_PER_INCH, "FPM": 12 * MM_PER_INCH, "PERMIN": None}
+_PER_REV: dict[str, float | None] = {"MMPR": 1.0, "IPR": MM_PER_INCH, "FPR": 12 * MM_PER_INCH, "PERREV": None}
 FEED_WORDS = frozenset({*_PER_MINUTE, *_PER_REV})
 
 
@@ -61,8 +63,8 @@ def fedrat(st: ReaderState, rec: Record) -> None:
         raise st.fail(f"FEDRAT has more than one unit word: {', '.join(words)[:60]}", rec.line)
     unit = words[0] if words else None
     if unit is not None and unit not in FEED_WORDS and unit != "INVERS":
-        raise st.fail(f"FEDRAT: unknown feed unit '{unit[:40]}' (expected MMPM, IPM, PERMIN, MMPR, IPR, PERREV "
-                      "or INVERS)", rec.line)
+        raise st.fail(f"FEDRAT: unknown feed unit '{unit[:40]}' (expected MMPM, IPM, FPM, PERMIN, MMPR, IPR, FPR, "
+                      "PERREV or INVERS)", rec.line)
     value = nums[0]
     st.fpr = None
     st.inverse = False
@@ -142,13 +144,16 @@ def spindl(st: ReaderState, rec: Record) -> None:
     _refresh_per_rev_feed(st, rec.line)
 
 
+_PRESSURES = frozenset({"LOW", "MEDIUM", "HIGH"})
 _COOLANT: dict[str, Literal["ON", "FLOOD", "MIST", "THRU", "OFF"]] = {
     "ON": "ON", "FLOOD": "FLOOD", "MIST": "MIST", "THRU": "THRU", "THROUGH": "THRU", "OFF": "OFF",
 }  # fmt: skip
 
 
 def coolnt(st: ReaderState, rec: Record) -> None:
-    words = [t for t in st.tokens(rec.args, "COOLNT", rec.line) if isinstance(t, str)]
+    """COOLNT/type[,pressure]: Creo writes ``COOLNT / type, pressure`` with pressure LOW, MEDIUM or HIGH
+    (PTC Creo help, "Supported CL Data Commands"), which one M code cannot carry: dropped."""
+    words = [t for t in st.tokens(rec.args, "COOLNT", rec.line) if isinstance(t, str) and t not in _PRESSURES]
     known = [_COOLANT[w] for w in words if w in _COOLANT]
     if len(known) != len(words) or not known:
         st.warn(rec.line, f"COOLNT/{rec.args.strip()[:40]}: coolant mode not supported, ignored", kind="COOLNT")

@@ -63,9 +63,19 @@ _FEED_UNIT_RE = re.compile(
 )
 
 Handler = Callable[[ReaderState, Record], None]
+def _head(st: ReaderState, rec: Record) -> None:
+    """HEAD/1 or HEAD/OFF change nothing on a one-spindle machine; Creo's HEAD/2, HEAD/BOTH (multiple
+    turrets, synchronised sequences: PTC Creo help, "Supported CL Data Commands") would merge two
+    heads' motion into one."""
+    toks = st.tokens(rec.args, "HEAD", rec.line)
+    if toks and toks[0] not in (1.0, "OFF"):
+        raise st.fail(f"HEAD/{rec.args.strip()[:40]}: motion for another head or several heads at once; this machine "
+                      "has one spindle: output head 1's CL data alone", rec.line)
+
+
 HANDLERS: dict[str, Handler] = {
     **motion.HANDLERS, **curves.HANDLERS, **tools.HANDLERS, **machine_functions.HANDLERS, **frames.HANDLERS,
-    **cycle_records.HANDLERS,
+    **cycle_records.HANDLERS, "HEAD": _head,
 }  # fmt: skip
 
 # Read and knowingly ignored: display, CAM-setup and bookkeeping records that change nothing the
@@ -78,7 +88,7 @@ HANDLERS: dict[str, Handler] = {
 _IGNORED = frozenset({
     "PAINT", "DISPLY", "PEN", "AUTOPS", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
     "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
-    "HEAD", "AUXFUN", "OPSKIP", "MOVNRB",
+    "AUXFUN", "OPSKIP", "MOVNRB",
 })  # fmt: skip
 _IGNORED_PREFIXES = ("CSI_SET_",)
 # Refused: records whose geometry cannot be honoured in one joint-space program.
