@@ -63,6 +63,45 @@ def arc_poses(tp: Toolpath) -> np.ndarray:
     return mask
 
 
+# --------------------------------------------------------------------------- layout
+
+
+def _relayout(text: str, rng: np.random.Generator, split: bool) -> str:
+    """The same records laid out differently, as APT allows: spaces around every comma and slash
+    ("spaces can appear anywhere in the record", Vericut's "Supported APT-CLS NC Program Records"),
+    CRLF line ends, and, with ``split``, records cut at a comma and continued with '$'."""
+    out = []
+    for line in text.splitlines():
+        head = line.lstrip().upper()
+        if "/" not in line or "$" in line or head.startswith(("PPRINT", "PARTNO", "INSERT")):
+            out.append(line)
+            continue
+        word, _, args = line.partition("/")
+        parts = args.split(",")
+        pads = [" " * int(k) for k in rng.integers(0, 3, 2 * len(parts))]
+        args = ",".join(pads[2 * k] + p.strip() + pads[2 * k + 1] for k, p in enumerate(parts))
+        line = word + " " * int(rng.integers(0, 3)) + "/" + args
+        if split and len(parts) > 2:
+            cut = [m.start() for m in re.finditer(",", line)][int(rng.integers(0, len(parts) - 1))]
+            line = line[:cut + 1] + "  $\n    " + line[cut + 1:]
+        out.append(line)
+    return "\r\n".join(out) + "\r\n"
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in SAMPLES.iterdir() if p.suffix != ".md"))
+@pytest.mark.parametrize("split", [False, True])
+def test_real_files_read_the_same_in_another_layout(tmp_path: Path, name: str, split: bool) -> None:
+    # the reader's one-line fast route and its general route must agree on the vendors' own files
+    original = read_cl(SAMPLES / name)
+    text = (SAMPLES / name).read_text(encoding="utf-8", errors="replace")
+    relaid = read(tmp_path, _relayout(text, np.random.default_rng(len(name)), split))
+    for field in ("tip", "axis", "feed", "rapid", "motion", "tool", "inverse_time"):
+        np.testing.assert_array_equal(getattr(relaid, field), getattr(original, field), err_msg=field)
+    if not split:
+        np.testing.assert_array_equal(relaid.line, original.line)
+    assert [type(e).__name__ for e in relaid.events] == [type(e).__name__ for e in original.events]
+
+
 # --------------------------------------------------------------------------- direction per dialect
 
 
