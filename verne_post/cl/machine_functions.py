@@ -235,8 +235,18 @@ def text_record(st: ReaderState, rec: Record) -> None:
     st.events.append(Comment(index=len(st.lines), line=rec.line, text=rec.args))
 
 
+def head(st: ReaderState, rec: Record) -> None:
+    """HEAD/1, HEAD/OFF and the like change nothing on a one-spindle machine; Creo's HEAD/2 and
+    HEAD/BOTH (multiple turrets, synchronised sequences: PTC Creo help, "Supported CL Data
+    Commands") would merge another head's motion into this one's."""
+    toks = st.tokens(rec.args, "HEAD", rec.line)
+    if toks and (toks[0] == "BOTH" or (isinstance(toks[0], float) and toks[0] != 1.0)):
+        raise st.fail(f"HEAD/{rec.args.strip()[:40]}: motion for another head or several heads at once; this machine "
+                      "has one spindle: output head 1's CL data alone", rec.line)
+
+
 HANDLERS = {
     "FEDRAT": fedrat, "SPINDL": spindl, "COOLNT": coolnt, "STOP": stop, "OPSTOP": opstop, "DELAY": delay,
     "CUTCOM": cutcom, "UNITS": units, "UNIT": units, "FINI": fini, "PPRINT": text_record, "PARTNO": text_record,
-    "INSERT": text_record,
+    "INSERT": text_record, "HEAD": head,
 }  # fmt: skip

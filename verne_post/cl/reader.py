@@ -63,25 +63,15 @@ _FEED_UNIT_RE = re.compile(
 )
 
 Handler = Callable[[ReaderState, Record], None]
-def _head(st: ReaderState, rec: Record) -> None:
-    """HEAD/1 or HEAD/OFF change nothing on a one-spindle machine; Creo's HEAD/2, HEAD/BOTH (multiple
-    turrets, synchronised sequences: PTC Creo help, "Supported CL Data Commands") would merge two
-    heads' motion into one."""
-    toks = st.tokens(rec.args, "HEAD", rec.line)
-    if toks and toks[0] not in (1.0, "OFF"):
-        raise st.fail(f"HEAD/{rec.args.strip()[:40]}: motion for another head or several heads at once; this machine "
-                      "has one spindle: output head 1's CL data alone", rec.line)
-
-
 HANDLERS: dict[str, Handler] = {
     **motion.HANDLERS, **curves.HANDLERS, **tools.HANDLERS, **machine_functions.HANDLERS, **frames.HANDLERS,
-    **cycle_records.HANDLERS, "HEAD": _head,
+    **cycle_records.HANDLERS,
 }  # fmt: skip
 
 # Read and knowingly ignored: display, CAM-setup and bookkeeping records that change nothing the
 # machine does. NX: PAINT, DISPLY...; Creo: MACHIN, MFGNO; SolidWorks CAM: CSI_SET_* (tool
 # flute/extension lengths for its own simulation), SETUP/START|END; Makino: SET/MODE,ABSOL
-# (absolute data, the only kind there is here); HSM: MODE, HEAD, AUXFUN (machine-specific codes);
+# (absolute data, the only kind there is here); HSM: MODE, AUXFUN (machine-specific codes);
 # Creo: MOVNRB, a NURBS written beside its own point-to-point GOTOs, which carry the motion (PTC
 # Creo help, "CL Output for NURBS Interpolation": MOVNRB/NEXT "indicates the start of the actual
 # point-to-point output").
