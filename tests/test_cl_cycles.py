@@ -273,6 +273,10 @@ def test_cycle_on_with_changes_replaces_or_adds_values() -> None:
     assert (spec.depth, spec.retract_auto, spec.pecks) == (74.5, True, (20.0,))
     with raises("CYCLE/ON: expected keyword,value pairs, got 3.0"):
         reactivated(defined, [3.0])
+    # a flag word alone; a feed in another unit replaces the old one
+    toks = reactivated(defined, ["RTRCTO", 5.0, "MANUAL", "MMPR", 0.2])
+    assert toks == ["DRILL", "DEEP", "STEP", 20.0, "CLEAR", 3.0, "FEDTO", -72.0, "MMPR", 0.2, "RTRCTO", 5.0, "MANUAL"]
+    assert parse_cycle(["DRILL", "CSINK", "RAPTO", 2.0, "FEDTO", -3.0, "MMPM", 80.0]).depth == 3.0
 
 
 def test_manual_retract_is_the_retract_value() -> None:

@@ -16,7 +16,7 @@ import pytest
 
 from verne_post.cl import read_cl
 from verne_post.errors import InputError
-from verne_post.toolpath import MOTION_KINDS, Coolant, Dwell, Toolpath
+from verne_post.toolpath import MOTION_KINDS, Coolant, Dwell, ToolChange, Toolpath
 
 SAMPLES = Path(__file__).resolve().parent / "data" / "cl-samples"
 NX_ZLEVEL = SAMPLES / "nx_zlevel_coremill_mm.cls"
@@ -205,6 +205,29 @@ def test_nx_gohome_with_its_own_point_and_dwell_in_revolutions(tmp_path: Path) -
     assert [e.seconds for e in tp.events if isinstance(e, Dwell)] == pytest.approx([0.3, 2.5])
     e = refused(tmp_path, NX_HEAD + "GOTO/10,0,0\nDELAY/REV,6\n")
     assert e.line == 6 and "needs a spindle speed" in e.reason
+
+
+def test_nx_tool_preselect_operations_and_cycles_as_nx_post_builder_defines_them(tmp_path: Path) -> None:
+    # NX Post Builder (ude.cdl, mom_vars_csv.txt): SELECT/TOOL is the tool_preselect event, LOAD/TOOL
+    # the change; each TOOL PATH is a path of its own; RTRCTO,AUTO is G98, whose initial level is
+    # where the tool was as the cycle began (a FROM before the first load too), kept while it runs;
+    # COOLNT/TAP is M8
+    text = ("TOOL PATH/DRILL,TOOL,D8\n$$ centerline data\nUNITS/MM\nFROM/0,0,100\nLOAD/TOOL,1\n"
+            "SPINDL/RPM,1000,CLW\nCYCLE/DRILL,RAPTO,3,FEDTO,-10,MMPM,250,RTRCTO,AUTO\nGOTO/0,0,0\nSELECT/TOOL,2\n"
+            "CYCLE/ON,RTRCTO,10,MANUAL\nGOTO/10,0,0\nCYCLE/ON,RTRCTO,AUTO,MMPR,0.1\nGOTO/20,0,0\n"
+            "END-OF-PATH\nTOOL PATH/MILL,TOOL,EM10\nCOOLNT/TAP\nFEDRAT/MMPM,500\nGOTO/30,0,0\nGOTO/40,0,0\n")
+    tp = read(tmp_path, text)
+    assert tp.warnings == ()
+    assert [(c.tool, c.line) for c in tp.events if isinstance(c, ToolChange)] == [(1, 5)]
+    assert [e.mode for e in tp.events if isinstance(e, Coolant)] == ["FLOOD"]
+    np.testing.assert_allclose(tp.tip[tp.line == 8], [[0, 0, 3], [0, 0, -10], [0, 0, 100]])
+    np.testing.assert_allclose(tp.tip[tp.line == 11], [[10, 0, 100], [10, 0, 3], [10, 0, -10], [10, 0, 10]])
+    np.testing.assert_allclose(tp.tip[tp.line == 13], [[20, 0, 10], [20, 0, 3], [20, 0, -10], [20, 0, 100]])
+    np.testing.assert_allclose(tp.tip[tp.line >= 17], [[30, 0, 0], [40, 0, 0]])  # the cycle ended with its path
+    e = refused(tmp_path, NX_HEAD + "CYCLE/DRILL,RAPTO,3,FEDTO,-10,MMPM,250,RTRCTO,AUTO\nGOTO/0,0,0\n")
+    assert e.line == 6 and "RTRCTO,AUTO" in e.reason and "no position before it" in e.reason
+    e = refused(tmp_path, NX_HEAD + "GOTO/0,0,0\nTHREAD/TURN,1.5\n")
+    assert e.line == 6 and "THREAD" in e.reason
 
 
 def test_length_compensation_is_not_cutter_compensation(tmp_path: Path) -> None:

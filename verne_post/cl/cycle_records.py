@@ -32,7 +32,8 @@ def cycle(st: ReaderState, rec: Record) -> None:
     if kind == "INIT":
         return
     no_pending_curve(st, "CYCLE", rec.line)
-    st.cycle_start = st.current_pose("CYCLE", rec.line)[0] if len(st.rows) else None
+    if st.cycle is None:  # G98's initial level is where the tool is as a cycle begins, kept while it runs
+        st.cycle_start = _position(st, rec.line)
     if kind == "ON":
         if st.last_cycle is None:
             raise st.fail("CYCLE/ON without a previous CYCLE", rec.line)
@@ -59,13 +60,26 @@ def cycle(st: ReaderState, rec: Record) -> None:
     st.last_cycle_tokens = toks
 
 
+def _position(st: ReaderState, line: int) -> np.ndarray | None:
+    """The tool tip now (CL frame, file units): the last pose, else a FROM given before any tool load."""
+    if len(st.rows):
+        return st.current_pose("CYCLE", line)[0]
+    if st.home is not None:
+        frame, tip, axis = st.home
+        return st.from_part(*st.to_part(tip, axis, frame))[0]
+    return None
+
+
 def drill(st: ReaderState, p: list[float], a: tuple[float, float, float], line: int) -> None:
     """One hole: the active cycle's moves from the top point ``p`` (file units) along the axis ``a``."""
     spec, feed = st.cycle
     st.take_rapid()
     axis = np.array(a, dtype=float) / np.linalg.norm(a)
     top = np.array(p, dtype=float)
-    if spec.retract_auto and st.cycle_start is not None:
+    if spec.retract_auto:
+        if st.cycle_start is None:
+            raise st.fail("CYCLE with RTRCTO,AUTO (back to the level where the cycle began) but no position "
+                          "before it", line)
         level = float((st.cycle_start - top) @ axis)
         if level > spec.retract:
             spec = replace(spec, retract=level)

@@ -98,7 +98,8 @@ _TYPES: dict[str, CycleKind] = {
     "BORE": "bore",
     "REAM": "bore",  # feed in, feed out
 }
-_SUBTYPES: dict[str, CycleKind] = {"DEEP": "deep", "BRKCHP": "brkchp"}  # CYCLE/DRILL,DEEP,...
+# CYCLE/DRILL,DEEP,...; NX's countersink (MOM_drill_counter_sink) feeds to FEDTO like a drill
+_SUBTYPES: dict[str, CycleKind] = {"DEEP": "deep", "BRKCHP": "brkchp", "CSINK": "drill"}
 _TAPPING = "tapping needs the feed synchronised with the spindle, which a joint-space program cannot express"
 _REJECTED = {
     "TAP": _TAPPING,
@@ -319,12 +320,17 @@ def reactivated(defined: list[float | str], changes: list[float | str]) -> list[
     k = 0
     while k < len(changes):
         key = changes[k]
+        if key == "MANUAL":  # a flag without a value
+            out += [] if key in out else [key]
+            k += 1
+            continue
         if not isinstance(key, str) or k + 1 >= len(changes):
             raise ValueError(f"CYCLE/ON: expected keyword,value pairs, got {','.join(map(str, changes))[:40]}")
         value = changes[k + 1]
-        at = [j for j in range(1, len(out) - 1) if out[j] == key]
+        same = _FEED_WORDS if key in _FEED_WORDS else {key}  # a new feed replaces the old in any unit
+        at = [j for j in range(1, len(out) - 1) if out[j] in same]
         if at:
-            out[at[0] + 1] = value
+            out[at[0]:at[0] + 2] = [key, value]
         else:
             out += [key, value]
         k += 2

@@ -37,6 +37,10 @@ not said (None); cutter compensation records are only acceptable on centre-line 
 of its Origin UDE, "the distance from the origin of the MCS to the center of the rotary table"
 (NX Post Builder's MOM variable list, ``mom_origin``), which leaves the GOTO data where they are.
 
+``select_loads``: ``SELECT/TOOL,n`` alone loads tool n (True), or is only the pre-selection of the
+next tool, as in NX (Post Builder's ude.cdl: ``SELECT/TOOL`` is the ``tool_preselect`` event,
+``LOAD/TOOL`` the tool change).
+
 ``cycle_point``: what the GOTO of a cycle in the classic positional form
 ``CYCLE/DRILL,d,unit,f,c[,RAPTO,r]`` is:
 
@@ -82,6 +86,7 @@ class Dialect:
     locked_axis: Literal["last", "z"] | None = None
     origin_is_frame: bool = True
     cycle_point: Literal["top", "bottom"] = "top"
+    select_loads: bool = True
 
     def describe(self, resolved: ArcDirection) -> str:
         """One line for the user: the dialect and the conventions applied (``resolved``: the arc direction used)."""
@@ -98,7 +103,7 @@ class Dialect:
 
 
 DIALECTS: dict[str, Dialect] = {
-    "nx": Dialect("Siemens NX CLSF", "cw", "local", origin_is_frame=False),
+    "nx": Dialect("Siemens NX CLSF", "cw", "local", origin_is_frame=False, select_loads=False),
     "makino": Dialect("Makino FF CAM APT-CL", "cw", "local"),
     "creo": Dialect("PTC Creo / Pro/CLfile", "ccw", "world"),
     "solidworks": Dialect("SolidWorks CAM APT", "ccw", "world"),

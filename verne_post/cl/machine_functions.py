@@ -147,6 +147,7 @@ def spindl(st: ReaderState, rec: Record) -> None:
 _PRESSURES = frozenset({"LOW", "MEDIUM", "HIGH"})
 _COOLANT: dict[str, Literal["ON", "FLOOD", "MIST", "THRU", "OFF"]] = {
     "ON": "ON", "FLOOD": "FLOOD", "MIST": "MIST", "THRU": "THRU", "THROUGH": "THRU", "OFF": "OFF",
+    "TAP": "FLOOD",  # tapping fluid: NX Post Builder gives it M8 (mom_sys_coolant_code(TAP)), as flood
 }  # fmt: skip
 
 

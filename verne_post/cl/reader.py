@@ -101,6 +101,7 @@ _REJECTED = {
     # Vericut's "Supported APT-CLS NC Program Records": ARC is CIRCLE with the end point added,
     # its field order not documented there
     "ARC": "ARC (an arc with its end point) is not supported: write the arc as CIRCLE then GOTO",
+    "THREAD": "THREAD (threading motion that follows the spindle) cannot be expressed in a joint-space program",
 }  # fmt: skip
 # Read as information, with a warning: ICAM's documentation of TRACUT says most CAM systems pass it,
 # if at all, as the transformation already applied to the data that follow.

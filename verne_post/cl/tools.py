@@ -1,7 +1,8 @@
 """Tool records: LOAD, LOADTL, SELECT, TLDATA, CUTTER and TOOL PATH (lengths in file units).
 
 ``LOAD/TOOL,n[,ADJUST,h]``, ``LOADTL/n[,LENGTH,l][,ADJUST|OSETNO,h][,IN,p]`` and ``SELECT/TOOL,n``
-(a load only when the operation header has no LOAD/LOADTL; otherwise a pre-selection) give one
+(a load only when the operation header has no LOAD/LOADTL, otherwise a pre-selection; in NX
+always the pre-selection, its tool_preselect event, NX's load being LOAD/TOOL) give one
 :class:`~verne_post.toolpath.ToolChange` per load. ``TLDATA/MILL|DRILL,dia,r,length,...`` and
 ``CUTTER/dia[,...]`` in the same header (the records between two motions) are merged into that
 load, before or after it. Without any load in the header they produce a ToolChange for the
@@ -164,9 +165,11 @@ def select(st: ReaderState, rec: Record) -> None:
     if len(toks) < 2 or toks[0] != "TOOL" or not isinstance(toks[1], float):
         st.warn(rec.line, f"SELECT/{rec.args.strip()[:40]}: only SELECT/TOOL,n is understood; ignored")
         return
+    tool = _tool_number(st, toks[1], rec.line)
+    if not st.dialect.select_loads:
+        return  # NX: SELECT/TOOL is its tool pre-select event (Post Builder's ude.cdl, tool_preselect)
     header = _header(st)
     header.open = True
-    tool = _tool_number(st, toks[1], rec.line)
     if header.select is None and not header.loads:
         header.select = {"tool": tool, "line": rec.line, "slot": _slot(st)}
     # otherwise a pre-selection of the next tool: no load
@@ -203,6 +206,9 @@ def cutter(st: ReaderState, rec: Record) -> None:
 
 
 def toolpath_name(st: ReaderState, rec: Record) -> None:
+    """NX's ``TOOL PATH/name,TOOL,tool``: a new operation, which NX posts as a path of its own
+    (MOM_start_of_path): a drilling cycle left on by the one before does not carry into it."""
+    st.cycle = None
     fields = [f.strip() for f in rec.args.split(",")]
     name = fields[0] if fields and fields[0] else "?"
     text = name
