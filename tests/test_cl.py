@@ -339,6 +339,17 @@ def test_multax_off_after_a_tilted_axis_is_refused_where_undocumented(tmp_path: 
     np.testing.assert_allclose(vertical.axis, [[0, 0, 1]] * 2)
 
 
+def test_every_motion_that_carries_the_axis_refuses_it_undecided(tmp_path: Path) -> None:
+    for motion in ("NURBS/\nKNOT/1.0\nCNTRL/1,2,0\nCNTRL/3,2,0\nCNTRL/4,0,0\nGOTO/9,9,9", "CLEARP/50\nRETRCT",
+                   "INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,1),ON,(LINE/0,0,0,0,1,0)", "GODLTA/5"):
+        e = err(tmp_path, MM + TILTED.replace("GOTO/2,0,0\n", motion + "\n"))
+        assert "MULTAX/OFF (line 6)" in e.reason
+    # GOHOME to a FROM pose sets the axis again
+    head = "UNITS/MM\nFEDRAT/MMPM,100\nFROM/0,0,100\nLOADTL/1\n"
+    text = head + TILTED.replace("GOTO/2,0,0\n", "GOHOME\nGOTO/5,5,5\n")
+    np.testing.assert_allclose(cl(tmp_path, text).axis[-1], [0, 0, 1])
+
+
 def test_bare_multax_is_multax_on(tmp_path: Path) -> None:
     # CATIA's APT format lists MULTAX and MULTAX/ON as one statement; NCL reads a bare MULTAX as ON
     tp = cl(tmp_path, MM + "MULTAX\nGOTO/0,0,0,0.6,0,0.8\n")
@@ -733,6 +744,8 @@ def test_gofwd_runs_on_the_circle_to_the_crossing_of_the_check_line(tmp_path: Pa
         ("INDIRV/1,0,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,1,0,0)", "does not point along the circle"),
         ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,1,0,0,10),ON,(LINE/0,0,0,1,0,0)", "axis is not the tool axis"),
         ("INDIRV/0,1,0\nTLON,GOFWD/(PLANE/0,0,1,0),ON,(LINE/0,0,0,1,0,0)", "only the form"),
+        ("GOTO/10,0,0\nTLON,GOFWD/(CIRCLE/0,0,0,10),ON,(LINE/0,0,0,0,10,0)", "has no length to give its direction"),
+        ("INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/10,0,0,0.001),ON,(LINE/0,0,0,0,10,0)", "from the circle's axis"),
     ],
 )
 def test_gofwd_that_cannot_be_honoured_is_refused(tmp_path: Path, records: str, message: str) -> None:
@@ -862,13 +875,31 @@ def test_clearance_plane_forms(tmp_path: Path, record: str, end: list[float] | N
         ("CLEARP/XYPLAN,50\nCLEARP/NOMORE\nRETRCT", "RETRCT without a clearance plane", 6),
         ("CLRSRF/0,0,0,0,0,1,20\nRETRCT", "clearance surface of line 4, a form not supported", 5),
         ("CLRSRF/NORMAL,10\nRETRCT", "clearance surface of line 4, a form not supported", 5),
-        ("CLEARP/0,0,0,5\nRETRCT", "normal has zero length", 4),
+        ("CLEARP/0,0,0,5\nRETRCT", "clearance surface of line 4, a form not supported", 5),
+        ("CLRSRF/(PLANE/0,0,1,50)\nRETRCT", "clearance surface of line 4, a form not supported", 5),
     ],
 )
 def test_retrct_that_cannot_be_honoured_is_refused(tmp_path: Path, records: str, message: str, line: int) -> None:
     # a skipped retract leaves the next move to run from the cut through the part
     e = err(tmp_path, MM + "GOTO/0,0,0\n" + records + "\nGOTO/50,0,50\n")
     assert message in e.reason and e.line == line
+
+
+def test_clearance_records_in_any_form_change_nothing_until_a_retract(tmp_path: Path) -> None:
+    for record in ("CLRSRF/(PLANE/0,0,1,50)", "CLRSRF/NORMAL,0,0,0,5", "CLEARP/ON", "CLRSRF/0,0,0,0,0,1,20"):
+        tp = cl(tmp_path, MM + f"GOTO/0,0,0\n{record}\nGOTO/1,0,0\n")
+        np.testing.assert_allclose(tp.tip, [[0, 0, 0], [1, 0, 0]])
+        assert tp.warnings == ()
+
+
+def test_a_motion_after_a_spline_that_is_not_a_goto_ends_the_spline_end_repeat(tmp_path: Path) -> None:
+    # after a NURBS, a GOTO repeating its end adds nothing; a retract, a GOHOME or an arc in between
+    # means the GOTO back down to that point is a move of its own
+    spline = "NURBS/\nKNOT/1.0\nCNTRL/1,2,0\nCNTRL/3,2,0\nCNTRL/4,0,0\n"
+    arc = "INDIRV/0,1,0\nTLON,GOFWD/(CIRCLE/0,0,0,4),ON,(LINE/0,0,0,0,1,0)"
+    for between in ("CLEARP/50\nRETRCT", "GOHOME/4,0,50", arc):
+        tp = cl(tmp_path, MM + "GOTO/0,0,0\n" + spline + between + "\nGOTO/4,0,0\nGOTO/10,0,0\n")
+        np.testing.assert_allclose(tp.tip[-2:], [[4, 0, 0], [10, 0, 0]])
 
 
 def test_retrct_from_above_the_plane_does_not_move_down(tmp_path: Path) -> None:

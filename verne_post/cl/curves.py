@@ -241,6 +241,7 @@ def gofwd(st: ReaderState, rec: Record) -> None:
     c = np.array(circle_nums[:3], dtype=float)
     n = _axis(st, circle_nums, "GOFWD circle", rec.line) if len(circle_nums) == 7 else np.array([0.0, 0.0, 1.0])
     r = _radius(st, circle_nums[-1], "GOFWD circle", rec.line)
+    st.carried_axis("GOFWD", rec.line)
     p0, a0 = st.current_pose("GOFWD", rec.line)
     if abs(float(a0 @ n)) < 1.0 - 1e-6:
         raise st.fail("GOFWD along a circle whose axis is not the tool axis is not supported", rec.line)
@@ -251,9 +252,11 @@ def gofwd(st: ReaderState, rec: Record) -> None:
     else:
         raise st.fail("GOFWD without INDIRV and without a move before it to give its direction", rec.line)
     st.indirv = None
+    if float(np.linalg.norm(direction)) < 1e-12 * max(1.0, float(np.abs(p0).max())):
+        raise st.fail("GOFWD without INDIRV, and the move before it has no length to give its direction", rec.line)
     offset = (p0 - c) - float((p0 - c) @ n) * n
     r0 = float(np.linalg.norm(offset))
-    if abs(r0 - r) > max(0.01 / st.scale, 1e-3 * r):
+    if abs(r0 - r) > max(0.01 / st.scale, 1e-3 * r) or r0 <= 1e-9 * max(r, 1.0):
         raise st.fail(f"GOFWD starts {r0:.5g} from the circle's axis, its radius is {r:.5g}", rec.line)
     u = offset / r0
     turn = float(np.cross(u, direction) @ n) / float(np.linalg.norm(direction))
@@ -338,6 +341,7 @@ def finish_spline(st: ReaderState) -> None:
                               np.array(spline.weights) if spline.weights else None, st.tol)
     except ValueError as error:
         raise st.fail(f"NURBS: {error}", spline.line) from None
+    st.carried_axis("NURBS", spline.line)
     st.add_poses(points, np.broadcast_to(np.array(st.axis), points.shape), spline.line, st.take_rapid(), "spline")
     st.skip_goto = np.array(points[-1], dtype=float) if len(points) else None
 

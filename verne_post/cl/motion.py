@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from verne_post.errors import InputError
+
 from . import curves, cycle_records
 from .lexer import Record
 from .state import Clearance, ReaderState
@@ -41,17 +43,8 @@ def point_axis(st: ReaderState, args: str, what: str, line: int) -> tuple[list[f
             raise st.fail(f"{what} has a tool axis (6 numbers) but MULTAX/OFF is in effect", line)
         st.check_axis(vals[3:], "tool axis", line)
         return vals[:3], (vals[3], vals[4], vals[5])
-    unsure_axis(st, what, line)
+    st.carried_axis(what, line)
     return vals, st.axis
-
-
-def unsure_axis(st: ReaderState, what: str, line: int) -> None:
-    """Refuse a motion that needs the carried tool axis where MULTAX/OFF left it undecided."""
-    if st.locked_axis_line is not None:
-        a = ", ".join(f"{v:.6g}" for v in st.axis)
-        raise st.fail(f"{what} after MULTAX/OFF (line {st.locked_axis_line}), which followed the tilted tool axis "
-                      f"({a}): {st.dialect.name} does not document whether the axis stays so (as CATIA's does) "
-                      "or returns to (0,0,1) (as Fusion's does); give TLAXIS/i,j,k after MULTAX/OFF", line)
 
 
 def motion_to(st: ReaderState, p: list[float], a: Axis, line: int) -> None:
@@ -105,6 +98,7 @@ def gohome(st: ReaderState, rec: Record) -> None:
     frame, tip, axis = st.home
     p, a = st.from_part(*st.to_part(tip, axis, frame))
     st.axis = (float(a[0]), float(a[1]), float(a[2]))
+    st.locked_axis_line = None  # the axis is known again
     st.take_rapid()
     st.add_pose(p, st.axis, rec.line, rapid=True)
 
@@ -116,7 +110,7 @@ def godlta(st: ReaderState, rec: Record) -> None:
     vals = st.numbers(rec.args, "GODLTA", rec.line)
     st.coordinate(vals, "GODLTA", rec.line)
     p, a = st.current_pose("GODLTA", rec.line)
-    unsure_axis(st, "GODLTA", rec.line)
+    st.carried_axis("GODLTA", rec.line)
     if len(vals) == 1:
         q = p + vals[0] * a
     elif len(vals) == 3:
@@ -131,10 +125,15 @@ _PLANE_WORDS = {"XYPLAN": (0.0, 0.0, 1.0), "YZPLAN": (1.0, 0.0, 0.0), "ZXPLAN": 
 
 def clearance(st: ReaderState, rec: Record) -> None:
     """CLEARP / CLRSRF: remember the clearance surface for RETRCT (file units, the current CL frame)."""
-    toks = st.tokens(rec.args, rec.word, rec.line)
-    numbers = [t for t in toks if isinstance(t, float)]
+    unusable = Clearance(rec.line, st.frame_id)  # any other form: refused only if a RETRCT needs it
+    try:
+        toks = st.tokens(rec.args, rec.word, rec.line)
+        numbers = [t for t in toks if isinstance(t, float)]
+        st.coordinate(numbers, rec.word, rec.line)
+    except InputError:
+        st.clearance = unusable
+        return
     words = [t for t in toks if isinstance(t, str)]
-    st.coordinate(numbers, rec.word, rec.line)
     normal: tuple[float, ...] | None = None
     if words == ["NOMORE"] and not numbers:
         st.clearance = None
@@ -148,12 +147,10 @@ def clearance(st: ReaderState, rec: Record) -> None:
         normal, distance = _PLANE_WORDS[words[0]], numbers[0]
     elif len(numbers) == 4 and (not words or (words == ["NORMAL"] and toks[0] == "NORMAL")):
         normal, distance = tuple(numbers[:3]), numbers[3]
-    if normal is None:
-        st.clearance = Clearance(rec.line, st.frame_id)  # a form RETRCT cannot use
+    length = float(np.linalg.norm(normal)) if normal is not None else 0.0
+    if normal is None or length < 1e-9:
+        st.clearance = unusable
         return
-    length = float(np.linalg.norm(normal))
-    if length < 1e-9:
-        raise st.fail(f"{rec.word}: the plane's normal has zero length", rec.line)
     st.clearance = Clearance(rec.line, st.frame_id, normal=np.array(normal) / length, distance=distance / length)
 
 
@@ -164,6 +161,7 @@ def retrct(st: ReaderState, rec: Record) -> None:
     surface = st.clearance
     if surface is None:
         raise st.fail("RETRCT without a clearance plane (no CLEARP or CLRSRF before it)", rec.line)
+    st.carried_axis("RETRCT", rec.line)
     p, a = st.current_pose("RETRCT", rec.line)
     if surface.point is not None:
         normal, distance = a, float(a @ st.from_part(*st.to_part(surface.point, a, surface.frame))[0])

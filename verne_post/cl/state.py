@@ -249,8 +249,17 @@ class ReaderState:
         else:
             self.runs.append(state)
 
+    def carried_axis(self, what: str, line: int) -> None:
+        """Refuse a motion that needs the carried tool axis where MULTAX/OFF left it undecided."""
+        if self.locked_axis_line is not None:
+            a = ", ".join(f"{v:.6g}" for v in self.axis)
+            raise self.fail(f"{what} after MULTAX/OFF (line {self.locked_axis_line}), which followed the tilted tool "
+                            f"axis ({a}): {self.dialect.name} does not document whether the axis stays so (as CATIA's "
+                            "does) or returns to (0,0,1) (as Fusion's does); give TLAXIS/i,j,k after MULTAX/OFF", line)
+
     def add_pose(self, p: list[float] | np.ndarray, a: tuple[float, ...] | np.ndarray, line: int, rapid: bool,
                  feed: float | None = None, motion: str = "feed") -> None:
+        self.skip_goto = None  # only the motion right after a spline may repeat its end
         if self.homeless is not None:
             raise self.fail("GOHOME without a FROM position (the machine's home is not known here), and motion "
                             "after it", self.homeless)
