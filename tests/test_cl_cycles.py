@@ -279,6 +279,14 @@ def test_cycle_on_with_changes_replaces_or_adds_values() -> None:
     assert parse_cycle(["DRILL", "CSINK", "RAPTO", 2.0, "FEDTO", -3.0, "MMPM", 80.0]).depth == 3.0
 
 
+def test_creo_fixed_format_deep_cycle() -> None:
+    # PTC Creo help, "CL Output for Holemaking Cycles", cycle_format fixed: CYCLE / type, z, f, units, t, r, i
+    spec = parse_cycle(["DEEP", 5.0, 80.0, "MMPM", 2.0, 1.0])
+    assert (spec.depth, spec.feed, spec.feed_unit, spec.approach, spec.pecks) == (5.0, 80.0, "MMPM", 2.0, (1.0,))
+    with raises("CYCLE/DRILL: unexpected number 1"):
+        parse_cycle(["DRILL", 5.0, 80.0, "MMPM", 2.0, 1.0])
+
+
 def test_manual_retract_is_the_retract_value() -> None:
     # NX Post Builder, mom_cycle_retract_mode: MANUAL is G99, back to the retract value
     spec = parse_cycle(["DRILL", "RAPTO", 3.0, "FEDTO", -33.0, "RTRCTO", 4.0, "MANUAL", "IPR", 0.25])

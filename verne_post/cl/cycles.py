@@ -33,6 +33,9 @@ Sources, per CAM family
   ``CYCLE/DEEP2,FEDTO,10.1,1STPECK,5.,SUBPECK,2.,MMPM,1097.28,RAPTO,3.,RTRCTO,10.`` (FEDTO
   positive). No documentation was found; DEEP2 is read as a full-retract peck cycle whose first
   peck is 1STPECK and every later one SUBPECK.
+* Creo's ``cycle_format fixed``: ``CYCLE / type, z, f, units, [t,] r, i`` (PTC Creo help, "CL Output
+  for Holemaking Cycles"; t only for TAP, i the depth increment of DEEP): read as the classic
+  form with the peck increment last.
 * Classic positional APT: ``CYCLE/DRILL, d, IPM, f, c [, RAPTO, r] [, DWELL, q]``,
   ``CYCLE/DEEP, d, INCR, i, IPM, f, c`` (depth first, clearance after the feed), read with the
   GOTO the hole top and c above it. Autodesk's "Common ISO 4343 APT" posts write the same shape
@@ -210,6 +213,9 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
                 i += 2
             elif feed is not None and "CLEAR" not in seen and "RAPTO" not in seen:
                 seen["CLEAR"] = _number(i, "clearance")  # classic APT: the clearance follows the feed
+                i += 1
+            elif positional and kind in ("deep", "brkchp") and not steps and "CLEAR" in seen:
+                steps.append(_number(i, "depth increment"))  # Creo's fixed form: type, z, f, units, r, i
                 i += 1
             else:
                 raise ValueError(f"CYCLE/{name}: unexpected number {float(t):g}")
