@@ -66,7 +66,7 @@ def _position(st: ReaderState, line: int) -> np.ndarray | None:
         return st.current_pose("CYCLE", line)[0]
     if st.home is not None:
         frame, tip, axis = st.home
-        return st.from_part(*st.to_part(tip, axis, frame))[0]
+        return st.to_current(tip, axis, frame)[0]
     return None
 
 

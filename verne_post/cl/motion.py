@@ -96,7 +96,7 @@ def gohome(st: ReaderState, rec: Record) -> None:
         st.homeless = rec.line
         return
     frame, tip, axis = st.home
-    p, a = st.from_part(*st.to_part(tip, axis, frame))
+    p, a = st.to_current(tip, axis, frame)
     st.axis = (float(a[0]), float(a[1]), float(a[2]))
     st.locked_axis_line = None  # the axis is known again
     st.take_rapid()
@@ -164,9 +164,9 @@ def retrct(st: ReaderState, rec: Record) -> None:
     st.carried_axis("RETRCT", rec.line)
     p, a = st.current_pose("RETRCT", rec.line)
     if surface.point is not None:
-        normal, distance = a, float(a @ st.from_part(*st.to_part(surface.point, a, surface.frame))[0])
+        normal, distance = a, float(a @ st.to_current(surface.point, a, surface.frame)[0])
     elif surface.normal is not None:
-        origin, normal = st.from_part(*st.to_part(surface.distance * surface.normal, surface.normal, surface.frame))
+        origin, normal = st.to_current(surface.distance * surface.normal, surface.normal, surface.frame)
         distance = float(normal @ origin)
     else:
         raise st.fail(f"RETRCT onto the clearance surface of line {surface.line}, a form not supported here "

@@ -310,6 +310,10 @@ class ReaderState:
         R, o = self.frames[self.frame_id]
         return R.T @ (p - o), R.T @ a
 
+    def to_current(self, p: np.ndarray, a: np.ndarray, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """A point and a direction given in CL frame ``frame``, in the current CL frame (file units)."""
+        return self.from_part(*self.to_part(p, a, frame))
+
     def current_pose(self, what: str, line: int) -> tuple[np.ndarray, np.ndarray]:
         """Last pose (tip, unit axis) expressed in the current CL frame."""
         if not self.rows:
@@ -318,7 +322,7 @@ class ReaderState:
         p, a = row[:3], row[3:] / np.linalg.norm(row[3:])
         frame = self.frame_of_pose(len(self.rows) - 1)
         if frame != self.frame_id:
-            p, a = self.from_part(*self.to_part(p, a, frame))
+            p, a = self.to_current(p, a, frame)
         return p, a
 
     # ------------------------------------------------------------------ result
