@@ -216,9 +216,6 @@ def gofwd(st: ReaderState, rec: Record) -> None:
     no_pending_curve(st, "GOFWD", rec.line)
     if st.cycle is not None:
         raise st.fail("GOFWD inside a drilling CYCLE", rec.line)
-    if rec.word != "TLON,GOFWD":
-        raise st.fail(f"{rec.word[:40]}: only TLON,GOFWD along a CIRCLE is supported (the tool centre on the "
-                      "circle); offset motion needs the part surfaces: output GOTO points", rec.line)
     m = _GOFWD_RE.match(rec.args)
     if m is None:
         raise st.fail("GOFWD: only the form (CIRCLE/x,y,z,r),ON,[n,INTOF,](LINE/x1,y1,z1,x2,y2,z2) is supported",
@@ -348,6 +345,5 @@ def finish_spline(st: ReaderState) -> None:
 
 HANDLERS = {
     "CIRCLE": circle, "MOVARC": movarc, "NURBS": nurbs, "KNOT": knot, "CNTRL": cntrl, "INDIRV": indirv,
-    **{f"{modifier},{go}": gofwd for modifier in ("TLON", "TLLFT", "TLRGT", "TLOFPS", "TLONPS")
-       for go in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN")},
+    "TLON,GOFWD": gofwd,  # any other modified GO statement is refused by the reader
 }  # fmt: skip

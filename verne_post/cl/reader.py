@@ -187,7 +187,8 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
     elif rec.word in _REJECTED:
         raise st.fail(_REJECTED[rec.word], rec.line)
     elif rec.word.rpartition(",")[2].startswith("GO"):  # a motion statement with modifiers: never dropped
-        raise st.fail(f"motion statement {rec.word[:40]} is not supported: output GOTO points", rec.line)
+        raise st.fail(f"motion statement {rec.word[:40]} is not supported (of them only TLON,GOFWD along a CIRCLE "
+                      "is: offset motion needs the part surfaces): output GOTO points", rec.line)
     elif rec.word in _INFORMATIONAL:
         st.warn(rec.line, _INFORMATIONAL[rec.word], kind=rec.word)
     elif rec.word not in _IGNORED and not rec.word.startswith(_IGNORED_PREFIXES):
