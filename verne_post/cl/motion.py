@@ -85,22 +85,20 @@ def gohome(st: ReaderState, rec: Record) -> None:
     has its own point: NX Post Builder's ``mom_gohome_pos``)."""
     curves.no_pending_curve(st, "GOHOME", rec.line)
     if rec.args.strip():
-        p, a = point_axis(st, rec.args, "GOHOME", rec.line)
-        st.axis = a
-        st.take_rapid()
-        st.add_pose(p, a, rec.line, rapid=True)
-        return
-    if st.home is None:  # the machine's home: fine as the program's last motion (Autodesk's posts end so)
+        p, axis = point_axis(st, rec.args, "GOHOME", rec.line)
+    elif st.home is None:  # the machine's home: fine as the program's last motion (Autodesk's posts end so)
         st.warn(rec.line, "GOHOME without a FROM position: the machine's home is not known here, so the program "
                 "ends at its last motion before it")
         st.homeless = rec.line
         return
-    frame, tip, axis = st.home
-    p, a = st.to_current(tip, axis, frame)
-    st.axis = (float(a[0]), float(a[1]), float(a[2]))
-    st.locked_axis_line = None  # the axis is known again
+    else:
+        frame, tip, home_axis = st.home
+        p, a = st.to_current(tip, home_axis, frame)
+        axis = (float(a[0]), float(a[1]), float(a[2]))
+        st.locked_axis_line = None  # the axis is known again
+    st.axis = axis
     st.take_rapid()
-    st.add_pose(p, st.axis, rec.line, rapid=True)
+    st.add_pose(p, axis, rec.line, rapid=True)
 
 
 def godlta(st: ReaderState, rec: Record) -> None:
