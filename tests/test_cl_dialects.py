@@ -254,6 +254,29 @@ def test_autodesk_positional_cycle_point_is_the_hole_bottom(tmp_path: Path) -> N
     np.testing.assert_allclose(classic.tip[classic.line == 5], [[20, 0, 15], [20, 0, -10], [20, 0, 15]])
 
 
+def test_autodesk_clearance_is_a_height_that_may_lie_below_the_work_zero(tmp_path: Path) -> None:
+    # The same post with the work zero on the stock top and the holes on a step 50 below it:
+    # cycle.clearance and cycle.retract are heights in the work frame (c = -35, retract -45, so
+    # r = 10), the hole tops at Z-50, the bottoms 12 below. Peck depths count from the top.
+    text = AUTODESK_HEAD + ("RAPID\nGOTO/10.0, 10.0, -35.0\nCYCLE/DRILL, 12.0, MMPM, 200.0, -35.0, RAPTO, 10.0\n"
+                            "FEDRAT/200.0, MMPM\nGOTO/10.0, 10.0, -62.0\nCYCLE/OFF\n"
+                            "CYCLE/DEEP, 12.0, INCR, 5.0, MMPM, 200.0, -35.0, RAPTO, 10.0\n"
+                            "FEDRAT/200.0, MMPM\nGOTO/30.0, 10.0, -62.0\nCYCLE/OFF\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip[tp.line == 11], [[10, 10, -45], [10, 10, -62], [10, 10, -35]])
+    hole, rapid = tp.tip[tp.line == 15], tp.rapid[tp.line == 15]
+    np.testing.assert_allclose(hole[:2], [[30, 10, -35], [30, 10, -45]])
+    np.testing.assert_allclose(hole[~rapid, 2], [-55, -60, -62])  # pecks of 5 from the top, then the bottom
+    assert hole[-1, 2] == pytest.approx(-35)
+    # its fine boring (G76) writes the shift after the clearance: refused, naming it
+    e = refused(tmp_path, AUTODESK_HEAD + "RAPID\nGOTO/0,0,20\nCYCLE/BORE, 10.0, MMPM, 100.0, 15.0, 0.1, RAPTO, 10.0, "
+                "ORIENT, 0\nGOTO/0,0,-10\n")
+    assert e.line == 9 and "fine boring with a shift" in e.reason
+    # the classic reading still wants a clearance above the hole
+    e = refused(tmp_path, APT_HEAD + "GOTO/20,0,40\nCYCLE/DRILL,10,MMPM,100,-15\nGOTO/20,0,0\n")
+    assert e.line == 4 and "CLEAR must not be negative" in e.reason
+
+
 def test_creo_records_as_its_supported_cl_data_commands_define_them(tmp_path: Path) -> None:
     # PTC Creo help, "Supported CL Data Commands" and "CL Output for Holemaking Cycles":
     # FEDRAT units FPM/FPR (feet), COOLNT / type, pressure; CYCLE ... RETURN, 0 "retract to the

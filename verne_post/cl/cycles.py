@@ -39,8 +39,10 @@ Sources, per CAM family
 * Classic positional APT: ``CYCLE/DRILL, d, IPM, f, c [, RAPTO, r] [, DWELL, q]``,
   ``CYCLE/DEEP, d, INCR, i, IPM, f, c`` (depth first, clearance after the feed), read with the
   GOTO the hole top and c above it. Autodesk's "Common ISO 4343 APT" posts write the same shape
-  with the GOTO the hole bottom and c an absolute height (``cycle_point`` in :mod:`.dialects`;
-  the reader converts, this module sees only the hole top and heights above it).
+  with the GOTO the hole bottom and c an absolute height, below zero where the holes are
+  (``cycle_point`` in :mod:`.dialects`; the reader converts, this module sees only the hole top
+  and heights above it); their fine boring (G76) adds its shift after c, refused as boring that
+  orients the spindle.
 
 Readings chosen
 ---------------
@@ -155,10 +157,13 @@ class CycleSpec:
     rapto: float | None = None  # the record's RAPTO value
 
 
-def parse_cycle(toks: list[float | str]) -> CycleSpec:
+def parse_cycle(toks: list[float | str], clearance_height: bool = False) -> CycleSpec:
     """Read the tokens of one ``CYCLE/`` record (numbers as float, words upper-case str).
 
     Keywords may come in any order; see the module docstring for the forms and their sources.
+    ``clearance_height``: the classic positional form's clearance is a height along the tool
+    axis, not a distance above the hole (Autodesk's posts, ``cycle_point`` "bottom" in
+    :mod:`.dialects`), so it may be negative: a part whose holes lie below the work zero.
     Raises ValueError with a one-line reason for unsupported, contradictory or incomplete forms.
     """
     if not toks or not isinstance(toks[0], str):
@@ -217,6 +222,10 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
             elif positional and kind in ("deep", "brkchp") and not steps and "CLEAR" in seen:
                 steps.append(_number(i, "depth increment"))  # Creo's fixed form: type, z, f, units, r, i
                 i += 1
+            elif positional and kind == "bore" and "CLEAR" in seen:
+                # Autodesk's posts write fine boring (G76) as CYCLE/BORE, d, unit, f, c, shift
+                raise ValueError(f"CYCLE/{name}: fine boring with a shift ({float(t):g} after the clearance) "
+                                 "needs the spindle oriented and the tool shifted off the wall")
             else:
                 raise ValueError(f"CYCLE/{name}: unexpected number {float(t):g}")
         elif t in _FEED_WORDS:
@@ -251,7 +260,8 @@ def parse_cycle(toks: list[float | str]) -> CycleSpec:
             raise ValueError(f"CYCLE/{name}: {_WORD_REJECTED[t]}")
         else:
             raise ValueError(f"CYCLE/{name}: unknown word '{t}'")
-    return replace(_spec(kind, name, seen, steps, feed, retract_auto), positional=positional,
+    return replace(_spec(kind, name, seen, steps, feed, retract_auto, positional and clearance_height),
+                   positional=positional,
                    clear=seen.get("CLEAR"), rapto=seen.get("RAPTO"))
 
 
@@ -262,6 +272,7 @@ def _spec(
     steps: list[float],
     feed: tuple[float, str | None] | None,
     retract_auto: bool,
+    clear_is_height: bool,
 ) -> CycleSpec:
     if "DEPTH" in seen and "FEDTO" in seen:
         raise ValueError(f"CYCLE/{name} gives both DEPTH and FEDTO")
@@ -273,7 +284,7 @@ def _spec(
         depth = abs(seen["FEDTO"])  # NX writes it negative (below the point), SolidWorks CAM positive
     else:
         raise ValueError(f"CYCLE/{name} has no depth (give DEPTH,d or FEDTO,d)")
-    for key in ("CLEAR", "RAPTO", "RTRCTO", "RETURN", "DWELL"):
+    for key in ("RAPTO", "RTRCTO", "RETURN", "DWELL") + (() if clear_is_height else ("CLEAR",)):
         if seen.get(key, 0.0) < 0:
             raise ValueError(f"CYCLE/{name} {key} must not be negative, got {seen[key]:g}")
     if "RAPTO" not in seen and "CLEAR" not in seen:
