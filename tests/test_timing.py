@@ -251,15 +251,99 @@ def test_engine_failure_raises_with_the_waypoint(monkeypatch: pytest.MonkeyPatch
     assert 80 <= info.value.index <= 120
 
 
-def test_unmet_jerk_limit_raises_instead_of_returning(limits: Limits,
-                                                      helix_path: tuple[np.ndarray, np.ndarray]) -> None:
-    """A short move needs a local slow-down round to meet the jerk limit: with none allowed it fails."""
+def test_unmet_jerk_limit_raises_instead_of_returning(machine: vp.Machine, limits: Limits,
+                                                      helix_path: tuple[np.ndarray, np.ndarray],
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """A short move needs a local slow-down round to meet the jerk limit: with none allowed it fails.
+    (An S-curve along the path, feed_planner._scurve_plans, plans it within the limits at once:
+    here the filtered plan alone.)"""
     joints, tip = helix_path
     feed = np.full(5, 50.0)
+    plan = plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0, max_refinements=0)
+    assert plan.gridpoints == 0  # the S-curve
+    check_feed_plan(machine, plan, joints[:6], tip[:6], feed, limits)
+    monkeypatch.setattr(feed_planner._Planner, "_scurve_plans", lambda self, seqs, planned: {})
     with pytest.raises(PlanningError, match="jerk limits found near waypoint"):
         plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0, max_refinements=0)
     plan = plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0)
     assert plan.refinements >= 1
+    check_feed_plan(machine, plan, joints[:6], tip[:6], feed, limits)
+
+
+def _reorientation(machine: vp.Machine, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A re-orientation as CAM writes it between two cuts: the tool axis tilts by 10 to 25 deg and
+    turns by 0.2 to 0.5 rad about the table normal over 12 to 30 blocks while the tip creeps 0.5
+    to 2 mm: (joints, tips)."""
+    while True:
+        n = int(rng.integers(13, 31))
+        start = np.array([rng.uniform(-30, 30), rng.uniform(-30, 30), rng.uniform(60, 80)])
+        creep = rng.normal(size=3)
+        tip = start + np.linspace(0.0, 1.0, n)[:, None] * creep / np.linalg.norm(creep) * rng.uniform(0.5, 2.0)
+        tilt0 = rng.uniform(5.0, 25.0)
+        tilt = np.radians(np.linspace(tilt0, tilt0 + rng.choice([-1, 1]) * rng.uniform(10.0, 25.0), n))
+        azimuth = rng.uniform(0, 2 * np.pi) + np.linspace(0.0, rng.choice([-1, 1]) * rng.uniform(0.2, 0.5), n)
+        if tilt.min() < np.radians(3.0):
+            continue
+        try:
+            return joints_along(machine, tip, axis_from(tilt, azimuth)), tip
+        except ValueError:
+            continue
+
+
+def test_reorientations_take_a_faster_s_curve_within_every_limit(machine: vp.Machine, limits: Limits,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """Short re-orientations: the S-curve along the path (feed_planner._scurve_plans) is kept
+    where it is faster than the filtered plan, and holds every limit at 1 ms."""
+    rng = np.random.default_rng(7)
+    moves = [_reorientation(machine, rng) for _ in range(24)]
+    feeds = [np.full(len(joints) - 1, 50.0) for joints, _ in moves]
+    plans = plan_feeds([(j, t, f) for (j, t), f in zip(moves, feeds, strict=True)], limits, angular_feed=1.0)
+    monkeypatch.setattr(feed_planner._Planner, "_scurve_plans", lambda self, seqs, planned: {})
+    filtered = plan_feeds([(j, t, f) for (j, t), f in zip(moves, feeds, strict=True)], limits, angular_feed=1.0)
+    scurves = 0
+    for (joints, tip), feed, plan, other in zip(moves, feeds, plans, filtered, strict=True):
+        assert isinstance(plan, FeedPlan) and isinstance(other, FeedPlan)
+        assert plan.total <= other.total
+        scurves += plan.gridpoints == 0  # no TOPP2 grid: an S-curve
+        worst = check_feed_plan(machine, plan, joints, tip, feed, limits)
+        assert max(worst["acc"], worst["jerk"]) >= 0.9  # it does use the limits
+        # finer than 1 ms finite differences can tell: the plan's own derivatives, densely
+        _, qd, qdd, qddd = plan.sample_all(np.linspace(0.0, plan.total, 20001))
+        for value, limit in ((qd, limits.velocity), (qdd, limits.acceleration), (qddd, limits.jerk)):
+            assert np.max(np.abs(value) / limit) <= 1.0 + 1e-6
+    assert scurves >= 20
+    assert sum(p.total for p in plans) <= 0.995 * sum(p.total for p in filtered)  # 0.8 % when written
+
+
+def test_s_curve_reaches_the_end_at_rest_within_each_phase_limits() -> None:
+    """feed_planner._scurve: from rest to rest over s in [0, 1] with its own limits per phase; with
+    the same limits in every phase, ruckig's time-optimal move."""
+    rng = np.random.default_rng(3)
+    count = 400
+    cap = 10.0 ** rng.uniform(-1, 2, count)
+    cap[::7] = 1e9  # no speed limit in reach
+    acc = 10.0 ** rng.uniform(0, 3, (count, 2))
+    jerk = 10.0 ** rng.uniform(1, 5, (count, 4))
+    same = np.arange(count) < 100
+    acc[same] = acc[same, :1]
+    jerk[same] = jerk[same, :1]
+    durations, jerks, _ = feed_planner._scurve(cap, acc, jerk)
+    profiles = feed_planner._scurve_profiles(np.arange(count), durations, jerks)
+    for r in range(count):
+        b0, b1 = profiles.bfirst[r], profiles.bfirst[r + 1]
+        law = feed_planner.Cubics(profiles.breaks[b0:b1], profiles.coef[:, b0 - r:b1 - r - 1])
+        total = durations[r].sum()
+        t = np.linspace(0.0, total, 2001)
+        assert law(np.array([total]))[0] == pytest.approx(1.0, abs=1e-9)
+        assert np.abs([law(np.array([x]), nu)[0] for x in (0.0, total) for nu in (1, 2)]).max() <= 1e-9 * cap[r]
+        speed, acceleration = law(t, 1), law(t, 2)
+        assert speed.min() >= -1e-9 * cap[r] and speed.max() <= cap[r] * (1 + 1e-9)
+        middle = np.searchsorted(t, durations[r, :4].sum())
+        assert acceleration[:middle].max() <= acc[r, 0] * (1 + 1e-9)
+        assert -acceleration[middle:].min() <= acc[r, 1] * (1 + 1e-9)
+        assert np.array_equal(np.abs(jerks[r, [0, 2, 4, 6]]), jerk[r])
+        if same[r]:
+            assert total == pytest.approx(ruckig_time(1.0, cap[r], acc[r, 0], jerk[r, 0]), rel=1e-7)
 
 
 def test_bad_input_is_a_value_error(limits: Limits, helix_path: tuple[np.ndarray, np.ndarray]) -> None:
