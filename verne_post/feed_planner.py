@@ -1081,7 +1081,7 @@ class _Planner:
                 # A sequence within every limit has its plan; one still over a limit only slows
                 # down in later rounds: its S-curve, if faster than this round, ends its rounds, or
                 # else may still win at the end (tried where it may beat 1.25 times this round:
-                # the later rounds cost the 105k job's re-orientations 2 to 13 %).
+                # the later rounds cost the 105k job's re-orientations 2 to 8 %).
                 over = np.isin(profiles.seqs, failing)
                 scurves = self._scurve_plans(profiles.seqs[good], (np.where(over, 1.25, 1.0) * profiles.total)[good])
                 first = dict(zip(profiles.seqs.tolist(), profiles.total.tolist(), strict=True))
