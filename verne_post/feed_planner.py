@@ -80,7 +80,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Literal
 
@@ -168,8 +168,8 @@ class FeedPlan:
     waypoint_s: np.ndarray  # (K + 1,) path parameter of the waypoints, 0 .. 1
     path: Cubics  # q(s): (5,) mm/rad, a cubic per block
     profile: Cubics  # s(t)
-    filter_width: float  # s, width of the jerk filter (0 without jerk limiting; one block: its S-curve's jerk time)
-    gridpoints: int  # TOPP2 gridpoints used
+    filter_width: float  # s, width of the jerk filter (0 without jerk limiting; an S-curve: its first jerk time)
+    gridpoints: int  # TOPP2 gridpoints used (0: an S-curve, no TOPP2)
     refinements: int  # local cap reductions needed to meet every limit
     # (3, 5): largest |velocity|, |acceleration|, |jerk| of each joint over its limit, found by
     # the planner's verification of this exact time law (at every piece and both sides of
@@ -1164,9 +1164,8 @@ class _Planner:
         plans = {}
         for k in np.flatnonzero(good & ~np.isin(profiles.seqs, failing)):
             r = int(profiles.seqs[k])
-            plan = self._feed_plan(r, profiles, int(k), times, 0, peaks[k])
-            plans[r] = FeedPlan(plan.durations, plan.block_times, plan.waypoint_s, plan.path, plan.profile,
-                                float(durations[faster[k], 0]), 0, 0, plan.peak_ratios)
+            plans[r] = replace(self._feed_plan(r, profiles, int(k), times, 0, peaks[k]),
+                               filter_width=float(durations[faster[k], 0]), gridpoints=0)
         return plans
 
     def _topp(self, r: int, xmax: np.ndarray, acc_scale: np.ndarray) -> np.ndarray | PlanningError:
