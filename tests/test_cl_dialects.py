@@ -254,7 +254,7 @@ def test_autodesk_positional_cycle_point_is_the_hole_bottom(tmp_path: Path) -> N
     np.testing.assert_allclose(classic.tip[classic.line == 5], [[20, 0, 15], [20, 0, -10], [20, 0, 15]])
 
 
-def test_autodesk_clearance_is_a_height_that_may_lie_below_the_work_zero(tmp_path: Path) -> None:
+def test_autodesk_cycles_below_the_work_zero_as_its_post_writes_them(tmp_path: Path) -> None:
     # The same post with the work zero on the stock top and the holes on a step 50 below it:
     # cycle.clearance and cycle.retract are heights in the work frame (c = -35, retract -45, so
     # r = 10), the hole tops at Z-50, the bottoms 12 below. Peck depths count from the top.
@@ -268,6 +268,14 @@ def test_autodesk_clearance_is_a_height_that_may_lie_below_the_work_zero(tmp_pat
     np.testing.assert_allclose(hole[:2], [[30, 10, -35], [30, 10, -45]])
     np.testing.assert_allclose(hole[~rapid, 2], [-55, -60, -62])  # pecks of 5 from the top, then the bottom
     assert hole[-1, 2] == pytest.approx(-35)
+    # its chip breaking: pecks of 5 from the top, each backing off as far as the approach (5, not
+    # RAPTO's 10, the distance between its two planes), and the dwelling period at the bottom
+    text = AUTODESK_HEAD + ("RAPID\nGOTO/10.0, 10.0, -35.0\nCYCLE/BRKCHP, 12.0, INCR, 5.0, MMPM, 200.0, -35.0, "
+                            "RAPTO, 10.0, DWELL, 0.5\nFEDRAT/200.0, MMPM\nGOTO/10.0, 10.0, -62.0\nCYCLE/OFF\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip[tp.line == 11, 2], [-45, -55, -50, -60, -55, -62, -35])
+    (dwell,) = [e for e in tp.events if isinstance(e, Dwell)]
+    assert dwell.seconds == 0.5 and tp.tip[dwell.index - 1, 2] == pytest.approx(-62)  # standing at the bottom
     # its fine boring (G76) writes the shift after the clearance: refused, naming it
     e = refused(tmp_path, AUTODESK_HEAD + "RAPID\nGOTO/0,0,20\nCYCLE/BORE, 10.0, MMPM, 100.0, 15.0, 0.1, RAPTO, 10.0, "
                 "ORIENT, 0\nGOTO/0,0,-10\n")

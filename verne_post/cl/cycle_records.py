@@ -46,7 +46,7 @@ def cycle(st: ReaderState, rec: Record) -> None:
             raise st.fail(str(error), rec.line) from None
         kind = str(toks[0])
     try:
-        spec = cycles.parse_cycle(toks, clearance_height=st.dialect.cycle_point == "bottom")
+        spec = cycles.parse_cycle(toks, autodesk=st.dialect.cycle_point == "bottom")
     except ValueError as error:
         reason = str(error)
         raise st.fail(reason if reason.startswith("CYCLE") else f"CYCLE/{kind[:20]}: {reason}", rec.line) from None

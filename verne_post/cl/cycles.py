@@ -41,8 +41,8 @@ Sources, per CAM family
   GOTO the hole top and c above it. Autodesk's "Common ISO 4343 APT" posts write the same shape
   with the GOTO the hole bottom and c an absolute height, below zero where the holes are
   (``cycle_point`` in :mod:`.dialects`; the reader converts, this module sees only the hole top
-  and heights above it); their fine boring (G76) adds its shift after c, refused as boring that
-  orients the spindle.
+  and heights above it); their chip breaking's DWELL is at the final depth; their fine boring
+  (G76) adds its shift after c, refused as boring that orients the spindle.
 
 Readings chosen
 ---------------
@@ -137,8 +137,8 @@ class CycleSpec:
     above the top; retract: height above the top after the hole (>= approach); feed and
     feed_unit: the record's feed and its unit word (None: not given; unit None with a feed:
     ``FEDRAT,f``, file units per minute); pecks: peck increments, the last one repeated;
-    chip_break: back-off after each peck of a 'brkchp' cycle; dwell: seconds at the bottom
-    (0: none); retract_auto: ``RTRCTO,AUTO`` asked for a return to the level before the cycle,
+    chip_break: back-off after each peck of a 'brkchp' cycle (None: the approach); dwell: seconds
+    at the bottom (0: none); retract_auto: ``RTRCTO,AUTO`` asked for a return to the level before the cycle,
     which the reader knows and this module does not.
     """
 
@@ -157,13 +157,15 @@ class CycleSpec:
     rapto: float | None = None  # the record's RAPTO value
 
 
-def parse_cycle(toks: list[float | str], clearance_height: bool = False) -> CycleSpec:
+def parse_cycle(toks: list[float | str], autodesk: bool = False) -> CycleSpec:
     """Read the tokens of one ``CYCLE/`` record (numbers as float, words upper-case str).
 
     Keywords may come in any order; see the module docstring for the forms and their sources.
-    ``clearance_height``: the classic positional form's clearance is a height along the tool
-    axis, not a distance above the hole (Autodesk's posts, ``cycle_point`` "bottom" in
-    :mod:`.dialects`), so it may be negative: a part whose holes lie below the work zero.
+    ``autodesk``: the classic positional form is written by Autodesk's posts (``cycle_point``
+    "bottom" in :mod:`.dialects`): its clearance is a height along the tool axis, not a distance
+    above the hole, so it may be negative (holes below the work zero), and a chip-breaking
+    cycle's DWELL is Fusion's "dwelling period", at the final depth before the retract (Autodesk
+    Inventor HSM / Fusion help, drilling Parameter Reference).
     Raises ValueError with a one-line reason for unsupported, contradictory or incomplete forms.
     """
     if not toks or not isinstance(toks[0], str):
@@ -260,7 +262,7 @@ def parse_cycle(toks: list[float | str], clearance_height: bool = False) -> Cycl
             raise ValueError(f"CYCLE/{name}: {_WORD_REJECTED[t]}")
         else:
             raise ValueError(f"CYCLE/{name}: unknown word '{t}'")
-    return replace(_spec(kind, name, seen, steps, feed, retract_auto, positional and clearance_height),
+    return replace(_spec(kind, name, seen, steps, feed, retract_auto, positional and autodesk),
                    positional=positional,
                    clear=seen.get("CLEAR"), rapto=seen.get("RAPTO"))
 
@@ -272,7 +274,7 @@ def _spec(
     steps: list[float],
     feed: tuple[float, str | None] | None,
     retract_auto: bool,
-    clear_is_height: bool,
+    autodesk: bool,
 ) -> CycleSpec:
     if "DEPTH" in seen and "FEDTO" in seen:
         raise ValueError(f"CYCLE/{name} gives both DEPTH and FEDTO")
@@ -284,7 +286,7 @@ def _spec(
         depth = abs(seen["FEDTO"])  # NX writes it negative (below the point), SolidWorks CAM positive
     else:
         raise ValueError(f"CYCLE/{name} has no depth (give DEPTH,d or FEDTO,d)")
-    for key in ("RAPTO", "RTRCTO", "RETURN", "DWELL") + (() if clear_is_height else ("CLEAR",)):
+    for key in ("RAPTO", "RTRCTO", "RETURN", "DWELL") + (() if autodesk else ("CLEAR",)):
         if seen.get(key, 0.0) < 0:
             raise ValueError(f"CYCLE/{name} {key} must not be negative, got {seen[key]:g}")
     if "RAPTO" not in seen and "CLEAR" not in seen:
@@ -310,7 +312,7 @@ def _spec(
     if "BACK" in seen and seen["BACK"] <= 0:
         raise ValueError(f"CYCLE/{name} BACK must be positive, got {seen['BACK']:g}")
     dwell = seen.get("DWELL", 0.0)
-    if kind == "brkchp" and dwell > 0:
+    if kind == "brkchp" and dwell > 0 and not autodesk:
         # Creo's BRKCHP DWELL is a dwell at every peck instead of a back-off, NX's a dwell at the bottom.
         raise ValueError(f"CYCLE/{name} with DWELL is ambiguous (a dwell at every peck or at the bottom)")
     if "ORIENT" in seen and kind != "bore":
@@ -324,7 +326,7 @@ def _spec(
         feed=None if feed is None else feed[0],
         feed_unit=None if feed is None else feed[1],
         pecks=pecks,
-        chip_break=(seen.get("BACK", approach) if kind == "brkchp" else None),
+        chip_break=seen.get("BACK") if kind == "brkchp" else None,  # None: as far as the approach
         dwell=dwell,
         retract_auto=retract_auto,
     )
