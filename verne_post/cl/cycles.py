@@ -138,8 +138,8 @@ class CycleSpec:
     feed_unit: the record's feed and its unit word (None: not given; unit None with a feed:
     ``FEDRAT,f``, file units per minute); pecks: peck increments, the last one repeated;
     chip_break: back-off after each peck of a 'brkchp' cycle (None: the approach); dwell: seconds
-    at the bottom (0: none); retract_auto: ``RTRCTO,AUTO`` asked for a return to the level before the cycle,
-    which the reader knows and this module does not.
+    at the bottom (0: none); retract_auto: ``RTRCTO,AUTO`` asked for a return to the level
+    before the cycle, which the reader knows and this module does not.
     """
 
     kind: CycleKind
@@ -263,8 +263,7 @@ def parse_cycle(toks: list[float | str], autodesk: bool = False) -> CycleSpec:
         else:
             raise ValueError(f"CYCLE/{name}: unknown word '{t}'")
     return replace(_spec(kind, name, seen, steps, feed, retract_auto, positional and autodesk),
-                   positional=positional,
-                   clear=seen.get("CLEAR"), rapto=seen.get("RAPTO"))
+                   positional=positional, clear=seen.get("CLEAR"), rapto=seen.get("RAPTO"))
 
 
 def _spec(
