@@ -679,11 +679,7 @@ def _straight_plans(batch: _Batch) -> list[FeedPlan]:
     start_acc = np.stack([zero, peak_acc, peak_acc, zero, zero, -peak_acc, -peak_acc], axis=1)
     j = np.where(np.isfinite(jerk), jerk, 0.0)
     seg_jerk = np.stack([j, zero, -j, zero, -j, zero, j], axis=1)
-    start_v, start_s = np.zeros((count, 7)), np.zeros((count, 7))
-    for k in range(6):
-        d, a, jk = durations[:, k], start_acc[:, k], seg_jerk[:, k]
-        start_v[:, k + 1] = start_v[:, k] + a * d + jk * d ** 2 / 2.0
-        start_s[:, k + 1] = start_s[:, k] + start_v[:, k] * d + a * d ** 2 / 2.0 + jk * d ** 3 / 6.0
+    start_s, start_v, _ = _phase_starts(durations, seg_jerk, start_acc)
     ratios = np.stack([top * slope / lim.velocity[:, None], peak_acc * slope / lim.acceleration[:, None],
                        (jerk * slope / lim.jerk[:, None]) if batch.jerk else np.zeros_like(slope)], axis=1)
     plans = []
@@ -833,14 +829,18 @@ def _scurve(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarray) -> tuple[np.ndar
     return durations, jerks, speed
 
 
-def _phase_starts(durations: np.ndarray, jerks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """s, sdot, sddot at the start of each phase (S, 7), from rest at s = 0."""
-    s, v, a = (np.zeros(durations.shape) for _ in range(3))
+def _phase_starts(durations: np.ndarray, jerks: np.ndarray, acc: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """s, sdot, sddot at the start of each phase (S, P), from rest at s = 0: the acceleration
+    integrated from the jerks, or ``acc`` where it is given (a trapezoid's steps)."""
+    s, v = np.zeros(durations.shape), np.zeros(durations.shape)
+    a = np.zeros(durations.shape) if acc is None else acc
     for k in range(durations.shape[1] - 1):
         h, j = durations[:, k], jerks[:, k]
         s[:, k + 1] = s[:, k] + v[:, k] * h + a[:, k] * h ** 2 / 2.0 + j * h ** 3 / 6.0
         v[:, k + 1] = v[:, k] + a[:, k] * h + j * h ** 2 / 2.0
-        a[:, k + 1] = a[:, k] + j * h
+        if acc is None:
+            a[:, k + 1] = a[:, k] + j * h
     return s, v, a
 
 
