@@ -38,11 +38,13 @@ def _run(tmp_path: Path, name: str, offset: tuple[float, ...], suffix: str, *ext
     return output
 
 
+@pytest.mark.parametrize("planning", [(), ("--optimize",)], ids=["filtered", "optimized"])
 @pytest.mark.parametrize(("name", "offset"), CASES)
-def test_timed_csv_respects_every_limit(tmp_path: Path, name: str, offset: tuple[float, ...]) -> None:
+def test_timed_csv_respects_every_limit(tmp_path: Path, name: str, offset: tuple[float, ...],
+                                        planning: tuple[str, ...]) -> None:
     machine = vp.load_machine()
     h = PERIOD.get(name, 0.001)
-    path = _run(tmp_path, name, offset, ".csv", "--period", str(h))
+    path = _run(tmp_path, name, offset, ".csv", "--period", str(h), *planning)
     header = path.read_text().split("\n", 1)[0].split(",")
     assert header[:6] == ["t", *NAMES] and header[-3:] == ["feed", "motion", "line"]
     data = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(17))

@@ -71,6 +71,7 @@ class PostOptions:
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
     plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
     planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
+    optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
 
 
@@ -356,6 +357,7 @@ class TimingTask:
     rotary_feed: float  # rad/s
     corner: float  # rad
     engine: Engine
+    optimize: bool  # also the third-order programme (plan_feeds)
     workers: int
     figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
 
@@ -367,7 +369,7 @@ def plan_timing(task: TimingTask) -> Timing:
         schedule = plan_program(task.joints, task.tip, task.rapid,
                                 _tip_speed(task.feed, task.inverse_time, task.tip, task.unplanned), task.group,
                                 task.limits, rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
-                                engine=task.engine)
+                                engine=task.engine, optimize=task.optimize)
     except SequenceError as error:
         violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
         return Timing(task.unplanned, violations=(violation,), seconds=time.perf_counter() - start)
@@ -507,7 +509,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
                 blocks.joints, blocks.tip, rapid, poses.feed[blocks.pose], poses.inverse_time[blocks.pose],
                 poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
-                options.planner, options.workers, figures))
+                options.planner, options.optimize, options.workers, figures))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))

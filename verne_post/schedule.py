@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .feed_planner import FeedPlan, plan_feeds
+from .feed_planner import LP_MIN_BLOCKS, FeedPlan, plan_feeds
 from .timing import Limits, PlanningError, RapidPlan, block_min_time, plan_rapid
 from .topp import Engine
 
@@ -57,6 +57,7 @@ class SequenceError(Exception):
 #: 10,000 (it starts later, by a fork, and sends its plans back: ~0.2 s), so this process plans
 #: that much more than each helper, and work below two helpers' cost is planned here alone.
 _SEQUENCE_WORK, _ONE_BLOCK_WORK, _PROCESS_WORK = 32, 10, 10_000
+_LP_WORK = 30
 
 
 def _split(items: list, work: np.ndarray, parts: int) -> list[list]:
@@ -92,33 +93,37 @@ def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, lim
     return [(int(rows[a]), int(rows[b])) for a, b in zip(first, last, strict=True)]
 
 
-def _plan_sequences(task: tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], Limits, float, float, bool, Engine]
-                    ) -> list[FeedPlan | tuple[str, int | None]]:
+def _plan_sequences(task: tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]], Limits, float, float, bool, Engine,
+                                bool]) -> list[FeedPlan | tuple[str, int | None]]:
     """plan_feeds for some sequences; a PlanningError comes back as (reason, waypoint) to cross processes."""
-    sequences, limits, rotary_feed, corner, jerk, engine = task
-    plans = plan_feeds(sequences, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9, jerk=jerk, engine=engine)
+    sequences, limits, rotary_feed, corner, jerk, engine, optimize = task
+    plans = plan_feeds(sequences, limits, angular_feed=rotary_feed, max_turn=corner + 1e-9, jerk=jerk, engine=engine,
+                       optimize=optimize)
     return [(p.reason, p.index) if isinstance(p, PlanningError) else p for p in plans]
 
 
 def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: np.ndarray, group: np.ndarray,
                  limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1, jerk: bool = True,
-                 engine: Engine = "copp") -> Schedule:
+                 engine: Engine = "copp", optimize: bool = False) -> Schedule:
     """Durations of M blocks: joints (M, 5) mm/rad, tip (M, 3) mm relative to the part, feed
     (M,) mm/s (maximum tip speed of the motion into each block), rotary_feed rad/s, corner rad.
 
     Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
     processes (same results). ``jerk=False`` leaves out the jerk limits of feed moves (for
     comparisons; rapids are always jerk-limited). ``engine`` is the TOPP2 engine (see
-    :mod:`verne_post.topp`). Raises :class:`SequenceError` naming the block where a sequence
-    cannot be planned.
+    :mod:`verne_post.topp`); ``optimize`` adds the third-order programme on long sequences
+    (:func:`~verne_post.feed_planner.plan_feeds`). Raises :class:`SequenceError` naming the
+    block where a sequence cannot be planned.
     """
     duration = np.zeros(len(joints))
     ranges = feed_sequences(joints, rapid, group, limits, corner)
     sequences = [(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in ranges]
     # Split by work, not by count: a row of 400 blocks and a one-block plunge are both a sequence.
     work = np.array([_ONE_BLOCK_WORK if a == b else b - a + 1 + _SEQUENCE_WORK for a, b in ranges])
+    if optimize:  # the third-order programme costs a long sequence about 30 times its filtered plan
+        work = np.where(work > LP_MIN_BLOCKS + 1 + _SEQUENCE_WORK, _LP_WORK * work, work)
     parts = max(1, min(workers, int(work.sum()) // (2 * _PROCESS_WORK)))
-    tasks = [(chunk, limits, rotary_feed, corner, jerk, engine) for chunk in _split(sequences, work, parts)]
+    tasks = [(chunk, limits, rotary_feed, corner, jerk, engine, optimize) for chunk in _split(sequences, work, parts)]
     if len(tasks) > 1:  # this process plans the first share while the others are planned beside it
         context = multiprocessing.get_context("fork")
         with ProcessPoolExecutor(max_workers=len(tasks) - 1, mp_context=context) as pool:
