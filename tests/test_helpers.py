@@ -36,6 +36,7 @@ def _figures(posted: pipeline.Posted, machine: vp.Machine, options: PostOptions)
 @pytest.mark.parametrize(("name", "size", "options"), [
     ("impeller_5axis.cls", 3000, PostOptions()),  # rapids, passes without rapids, the pole crossed
     ("nx_variable_axis_inch.cls", 30, PostOptions(plan=False)),  # its verification fails: the same findings
+    ("nx_variable_axis_inch.cls", 30, PostOptions(optimize=True)),  # the helper plans in processes of its own
 ])
 def test_helpers_post_what_one_process_posts(tmp_path: Path, name: str, size: int, options: PostOptions) -> None:
     machine = vp.load_machine()

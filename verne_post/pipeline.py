@@ -673,7 +673,9 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
 
 
 def _plan_in(helper: Helper, task: TimingTask) -> Future[Timing]:
-    return helper.submit(_plan_for_posting, replace(task, workers=1))  # the helper is one process
+    # The helper is one process; with the third-order programme, whose planning outweighs every
+    # other stage several times, it shares each part's planning with processes of its own.
+    return helper.submit(_plan_for_posting, task if task.optimize else replace(task, workers=1))
 
 
 def _plan_for_posting(task: TimingTask) -> Timing:
