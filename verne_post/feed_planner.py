@@ -1236,7 +1236,8 @@ class _Planner:
         are, the programme keeping the filtered law within them. Rounds as in :meth:`plan`: a
         law over a cap has the caps of the gridpoints around the excess lowered by it, one over
         an acceleration or jerk limit its sequence's margins; a sequence that finds no law
-        within every limit is left out (its filtered plan stays)."""
+        within every limit is left out (its filtered plan stays). The planner's filter widths
+        become the programme's windows."""
         grid, count, n = self.grid, self.batch.count, len(self.grid.start)
         upper, active = self._second_order_upper()
         margin = np.tile([_LP_ACC_MARGIN, _LP_JERK_MARGIN], (count, 1))
