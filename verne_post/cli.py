@@ -425,7 +425,7 @@ _choices_after_report = [
                  help="Also plan each feed sequence of more than 40 blocks by a third-order linear programme "
                       "(HiGHS) and keep it where verified and faster: about 1 % off rows that climb into a "
                       "rotary limit, 0.3 % off the whole 105k-block benchmark job, for planning about 30 times "
-                      "slower (the whole command about 10 times)."),
+                      "slower (the whole command about 6 times)."),
     click.option("--quiet", "-q", is_flag=True, help="No progress bar and no warnings on stderr."),
     click.option("--max-messages", type=MAX_MESSAGES, default=20, show_default=True,
                  help="Violations printed before the count."),
