@@ -1221,14 +1221,14 @@ class _Planner:
                 active.append(r)
         return np.minimum(upper, caps), active
 
-    def _third_order_problem(self, r: int, upper: np.ndarray, margin: np.ndarray) -> third_order.ThirdOrderProblem:
-        """Sequence r's programme under the caps ``upper`` with the (acceleration, jerk) margins."""
+    def _third_order_problem(self, r: int, upper: np.ndarray, q3: np.ndarray, margin: np.ndarray
+                             ) -> third_order.ThirdOrderProblem:
+        """Sequence r's programme under the caps ``upper`` with the (acceleration, jerk) margins;
+        q3 the path's third derivatives at every gridpoint."""
         g = slice(self.grid.first[r], self.grid.first[r + 1])
-        s = self.grid.start[g]
-        q3 = self.batch.path.derivatives(self.batch.path.locate(np.full(len(s), r), s), s, (3,))[0].T
         lim = self.batch.limits
-        return third_order.ThirdOrderProblem(s, upper[g], self.q1[g], self.q2[g], q3, margin[0] * lim.acceleration,
-                                             margin[1] * lim.jerk)
+        return third_order.ThirdOrderProblem(self.grid.start[g], upper[g], self.q1[g], self.q2[g], q3[g],
+                                             margin[0] * lim.acceleration, margin[1] * lim.jerk)
 
     def third_order_plans(self) -> dict[int, FeedPlan]:
         """Verified plans of this batch's sequences by the third-order linear programme
@@ -1240,6 +1240,8 @@ class _Planner:
         become the programme's windows."""
         grid, count, n = self.grid, self.batch.count, len(self.grid.start)
         upper, active = self._second_order_upper()
+        path = self.batch.path
+        q3 = path.derivatives(path.locate(grid.owner, grid.start), grid.start, (3,))[0].T  # (G, 5), once
         margin = np.tile([_LP_ACC_MARGIN, _LP_JERK_MARGIN], (count, 1))
         x = np.zeros(n)
         plans: dict[int, FeedPlan] = {}
@@ -1247,7 +1249,7 @@ class _Planner:
             solved = []
             for r in active:
                 g = slice(grid.first[r], grid.first[r + 1])
-                problem = self._third_order_problem(r, upper, margin[r])
+                problem = self._third_order_problem(r, upper, q3, margin[r])
                 if attempt == 0:
                     # The window: _LP_WINDOW longest inner intervals of a first law (found with the
                     # second-order law's longest): an interval longer than the window bounds its

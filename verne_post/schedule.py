@@ -121,7 +121,7 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     # Split by work, not by count: a row of 400 blocks and a one-block plunge are both a sequence.
     work = np.array([_ONE_BLOCK_WORK if a == b else b - a + 1 + _SEQUENCE_WORK for a, b in ranges])
     if optimize:  # the third-order programme costs a long sequence about 30 times its filtered plan
-        work = np.where(work > LP_MIN_BLOCKS + 1 + _SEQUENCE_WORK, _LP_WORK * work, work)
+        work = np.where(work > LP_MIN_BLOCKS + _SEQUENCE_WORK, _LP_WORK * work, work)
     parts = max(1, min(workers, int(work.sum()) // (2 * _PROCESS_WORK)))
     tasks = [(chunk, limits, rotary_feed, corner, jerk, engine, optimize) for chunk in _split(sequences, work, parts)]
     if len(tasks) > 1:  # this process plans the first share while the others are planned beside it

@@ -10,7 +10,7 @@ rotary-limited one, that costs about 1 % over what a third-order method reaches.
 Here the profile is chosen for the filter instead of filtered after the fact. On the planner's
 grid s_0 < ... < s_N (path parameter, 0..1) the squared path speeds x_i (1/s^2) define the
 profile sigma(t) with constant path acceleration ``u_i = (x_{i+1} - x_i) / (2 (s_{i+1} - s_i))``
-on each interval; its moving average of a short width w (about one grid interval) has the path
+on each interval; its moving average of a short width w (a few grid intervals) has the path
 jerk ``(u(t) - u(t - w)) / w``, the difference of the accelerations of the two intervals that t
 and t - w fall in. For every such pair of intervals the joint jerks
 ``q_j' sdddot + 3 q_j'' sdot sddot + q_j''' sdot^3`` are bounded in x, linearly (sdot taken
