@@ -413,6 +413,10 @@ _choices_before_report = [
                  help="Tool axis deviation allowed between blocks, degrees."),
     click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
                  help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
+    click.option("--rapid-tol", type=TIP_TOL, default=0.5, show_default=True,
+                 help="Tool tip deviation allowed from a CL rapid's straight line, mm (never below it)."),
+    click.option("--rapid-axis-tol", type=AXIS_TOL, default=0.5, show_default=True,
+                 help="Tool axis deviation allowed in a CL rapid, degrees."),
     *_reader_options,
 ]
 _choices_after_report = [
@@ -728,6 +732,9 @@ def _print_findings(verification: Verification, max_messages: int) -> None:
               help="Tool axis deviation allowed, degrees (default: the program header's, else 0.05).")
 @click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
               help="Chordal deviation of CIRCLE arcs expanded into CL points, mm.")
+@click.option("--rapid-tol", type=TIP_TOL, default=None,
+              help="How far a rapid may leave its CL line (never below it; with --against), or dip below the "
+                   "lower of its ends (without), mm (default: the program header's, else 0.5).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the findings as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="Nothing on stderr but the findings.")
 @click.option("--max-messages", type=MAX_MESSAGES, default=20, show_default=True,
@@ -736,8 +743,8 @@ def _print_findings(verification: Verification, max_messages: int) -> None:
 @user_errors
 def verify_command(program: str, cl_file: str | None, machine_path: str | None,
                    work_offset: tuple[float, float, float] | None, units: str | None, tol: float | None,
-                   axis_tol: float | None, arc_tol: float, report_path: str | None, quiet: bool,
-                   max_messages: int, arc_direction: str | None, frame: str | None) -> None:
+                   axis_tol: float | None, arc_tol: float, rapid_tol: float | None, report_path: str | None,
+                   quiet: bool, max_messages: int, arc_direction: str | None, frame: str | None) -> None:
     """Verify a joint-space G-code program: limits and margins along the motion, and with
     --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
     from .cl import read_toolpath
@@ -752,7 +759,7 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     against = None if cl_file is None else read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol,
                                                          arc_direction=arc_direction, frame=frame)
     verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
-                                  tol=tol, axis_tol=axis_tol)
+                                  tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol)
     if report_path:
         write_json(report_path, verification.report())
     if not verification.ok:

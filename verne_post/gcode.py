@@ -47,6 +47,7 @@ from verne_post.toolpath import Comment, Coolant, Dwell, Event, Spindle, Stop, T
 __all__ = [
     "MAX_COMMENT_CHARS",
     "PREAMBLE",
+    "RAPID_MARK",
     "FeedRateError",
     "GcodeFormat",
     "GcodeWriter",
@@ -126,8 +127,11 @@ class Program:
 
     - ``joints`` (M, 5): end position of each block: rho1, rho2, rho3 in mm, theta1, theta2 in
       radians.
-    - ``rapid`` (M,) bool: the block is a G0 (else a G1 feed block in inverse time).
-    - ``duration`` (M,) s: duration of each feed block, > 0 (ignored on rapids).
+    - ``rapid`` (M,) bool: the block is a G0 (else a G1 block in inverse time): positioning
+      from where the machine stands, at the controller's speeds.
+    - ``duration`` (M,) s: duration of each G1 block, > 0 (ignored on G0).
+    - ``between`` (M,) bool or None: G1 blocks of a move between cuts, planned at the joint limits
+      (a rapid kept on its CL line, a retract, reorientation or approach), marked ``(RAPID)``.
     - ``line`` (M,): CL source line of each block, for error messages.
     - ``events``: non-motion records; ``event.index`` is the block they precede (M: at the end).
     - ``header``: provenance comment lines (no dates), e.g. ``"MACHINE verne.yaml"``.
@@ -142,6 +146,12 @@ class Program:
     part_name: str | None = None
     header: tuple[str, ...] = ()
     tool_lengths: dict[int, tuple[float, float]] | None = None
+    between: np.ndarray | None = None
+
+
+#: The comment that ends a G1 block of a move between cuts: the controller runs it as written
+#: (G93, so the planned time), and a reader tells it from a cut (verne_post.gcode_reader).
+RAPID_MARK = "(RAPID)"
 
 
 class FeedRateError(CheckError, ValueError):
@@ -255,6 +265,7 @@ def _motion_text(
     f_scaled: np.ndarray,
     block_numbers: np.ndarray | None,
     fmt: GcodeFormat,
+    between: np.ndarray | None = None,
 ) -> tuple[str, np.ndarray]:
     """Motion blocks of one chunk as one string (lines ending in ``\\n``) and line offsets.
 
@@ -278,6 +289,10 @@ def _motion_text(
         f_field = fixed_field(np.where(feed, f_scaled, 0), fmt.feed_decimals, b" F")
         f_field[rapid] = 0
         parts.append(f_field)
+    if between is not None and np.any(between):
+        mark = np.zeros((n, len(RAPID_MARK) + 1), dtype=np.uint8)
+        mark[between] = np.frombuffer((" " + RAPID_MARK).encode("ascii"), dtype=np.uint8)
+        parts.append(mark)
     parts.append(np.full((n, 1), ord("\n"), dtype=np.uint8))
     mat = np.concatenate(parts, axis=1)
     keep = mat != 0
@@ -402,6 +417,9 @@ class GcodeWriter:
         of text pieces, each one or more ``\\n``-ended lines; events at index M (after the part's
         last block) come last."""
         joints, rapid, f_scaled, _ = _prepare(program, self.fmt)
+        between = None if program.between is None else np.asarray(program.between, bool).reshape(-1) & ~rapid
+        if between is not None and between.shape[0] != joints.shape[0]:
+            raise ValueError(f"Program.between has {between.shape[0]} entries for {joints.shape[0]} blocks")
         fmt = self.fmt
         m = joints.shape[0]
         step = int(fmt.block_number_step)
@@ -442,7 +460,8 @@ class GcodeWriter:
                 if fmt.block_numbers:
                     i = np.arange(c0, c1, dtype=np.int64)
                     numbers = (before + extra[c0:c1] + i + 1) * step
-                text, off = _motion_text(joints[c0:c1], rapid[c0:c1], f_scaled[c0:c1], numbers, fmt)
+                text, off = _motion_text(joints[c0:c1], rapid[c0:c1], f_scaled[c0:c1], numbers, fmt,
+                                         None if between is None else between[c0:c1])
                 prev = c0
                 while e < len(events_at) and events_at[e] < c1:
                     idx = events_at[e]

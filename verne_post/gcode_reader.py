@@ -36,10 +36,14 @@ _NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)"
 _WORD = re.compile(rf"([A-Z])({_NUMBER})")
 _BLOCK = re.compile(rf"(?:[A-Z]{_NUMBER})*")
 # A parenthesised comment, or a ";" comment to the end of the line, whichever comes first.
+#: The comment that marks a G1 block as a move between cuts (a rapid planned at the joint limits,
+#: run in inverse time as written): verne-post writes ``(RAPID)`` at the end of such blocks.
+RAPID_WORD = "RAPID"
 _COMMENT = re.compile(r"\(([^()]*)\)|;.*")
 _TOOL_NOTE = re.compile(rf"^\s*TOOL\s+(\d+)\s+LENGTH\s+({_NUMBER})\s+DELTA\s+({_NUMBER})\s*$", re.IGNORECASE)
 _WORK_OFFSET = re.compile(rf"^\s*WORK\s+OFFSET\s+({_NUMBER})\s+({_NUMBER})\s+({_NUMBER})\b", re.IGNORECASE)
 _TOLERANCE = re.compile(rf"^\s*TOLERANCE\s+({_NUMBER})\s+MM\s+({_NUMBER})\s+DEG\b", re.IGNORECASE)
+_RAPID_TOLERANCE = re.compile(rf"\bRAPIDS\s+({_NUMBER})\s+MM\b", re.IGNORECASE)
 
 # G codes (tenths) that change nothing this reader needs beyond what it tracks: plane, cutter
 # compensation off, tool length offset off, canned cycle off, G54 (no offset in joint space),
@@ -61,15 +65,17 @@ class GcodeProgram:
 
     - ``joints`` (M, 5): end of each block: rho1..3 in mm, theta1, theta2 in radians (NaN for an
       axis never programmed so far).
-    - ``rapid`` (M,): G0; ``inverse_time`` (M,): G93 in force.
+    - ``rapid`` (M,): G0, or a G1 marked ``(RAPID)`` (a move between cuts, timed by its F);
+      ``inverse_time`` (M,): G93 in force.
     - ``feed`` (M,): F in force: 1/min under G93, mm/min (deg/min for rotary-only moves) under
       G94; NaN where the controller has none (G93 block without F, G94 before any F).
-    - ``duration`` (M,) s: how long the controller takes for a G1 block at its F (NaN on rapids,
+    - ``duration`` (M,) s: how long the controller takes for a G1 block at its F (NaN on G0,
       without a feed, or for a first block whose start is unknown).
     - ``line`` (M,): 1-based line of each block in the file.
     - ``tool`` (M,): tool in the spindle (-1 none); ``tool_length`` (M,) mm from the TOOL
       comment of that tool in force, NaN if none.
-    - ``work_offset`` (mm) and ``tolerance`` (mm, deg) from the header, if it gives them.
+    - ``work_offset`` (mm) and ``tolerance`` (mm, deg, and the rapids' mm or NaN) from the
+      header, if it gives them.
     - ``end_line``: line of M2/M30, None if the program never ends; ``last_line``: the last
       non-blank line read.
     - ``problems``: (line, reason) for what the controller would refuse while running.
@@ -86,7 +92,7 @@ class GcodeProgram:
     tool_length: np.ndarray
     tool_notes: tuple[ToolNote, ...]
     work_offset: tuple[float, float, float] | None
-    tolerance: tuple[float, float] | None
+    tolerance: tuple[float, float, float] | None
     end_line: int | None
     last_line: int
     problems: tuple[tuple[int, str], ...]
@@ -134,7 +140,7 @@ class ReadState:
     lengths: dict[int, float]  # tool -> length (mm) of the TOOL comments read
     selected: int  # the tool of the last T word
     work_offset: tuple[float, float, float] | None
-    tolerance: tuple[float, float] | None
+    tolerance: tuple[float, float, float] | None
     opened: bool  # the program starts with '%'
     end_line: int | None  # M2/M30
     stop_line: int | None  # M2/M30 or the closing '%': nothing after it runs
@@ -257,11 +263,12 @@ class _Interpreter:
         self.lengths: dict[int, float] = {} if state is None else dict(state.lengths)
         self.selected = -1 if state is None else state.selected
         self.work_offset: tuple[float, float, float] | None = None if state is None else state.work_offset
-        self.tolerance: tuple[float, float] | None = None if state is None else state.tolerance
+        self.tolerance: tuple[float, float, float] | None = None if state is None else state.tolerance
         self.end_line: int | None = None if state is None else state.end_line
         self.stop_line: int | None = None if state is None else state.stop_line
         self.opened = state is not None and state.opened
         self.closed = False
+        self.marked: list[int] = []  # lines of G1 blocks marked as moves between cuts
 
     def fail(self, number: int, reason: str) -> InputError:
         return InputError(reason, self.source, number)
@@ -284,6 +291,8 @@ class _Interpreter:
                 raise self.fail(number, "unbalanced or nested parenthesis in a comment")
             for comment in comments:
                 state = self._comment(number, comment, state)
+            if any(c.strip().upper() == RAPID_WORD for c in comments):
+                self.marked.append(number)
         code = "".join(code.split()).upper()
         if code.startswith("/"):
             raise self.fail(number, "block delete '/' is not supported: whether the block runs depends on a switch")
@@ -347,7 +356,9 @@ class _Interpreter:
         elif self.work_offset is None and (match := _WORK_OFFSET.match(comment)):
             self.work_offset = (float(match.group(1)), float(match.group(2)), float(match.group(3)))
         elif self.tolerance is None and (match := _TOLERANCE.match(comment)):
-            self.tolerance = (float(match.group(1)), float(match.group(2)))
+            rapids = _RAPID_TOLERANCE.search(comment)
+            self.tolerance = (float(match.group(1)), float(match.group(2)),
+                              float(rapids.group(1)) if rapids else np.nan)
         return state
 
 
@@ -378,15 +389,17 @@ def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray
     # G93: the F word is not modal; G94: the last F since the last G93/G94 word.
     given_feed = _last_given(table[:, 6], epoch)
     feed = np.where(inverse_time, table[:, 6], given_feed)
-    rapid = motion == 0
-    feed[rapid] = np.nan
+    positioning = motion == 0
+    feed[positioning] = np.nan
+    # a G1 marked (RAPID) is a move between cuts: timed as written, judged as a rapid
+    rapid = positioning | np.isin(line, np.asarray(reader.marked, dtype=np.int64))
     keep = np.flatnonzero(moves)
-    for k in keep[~rapid[keep] & ~(feed[keep] > 0)]:
+    for k in keep[~positioning[keep] & ~(feed[keep] > 0)]:
         problems.append((int(line[k]), "G1 in inverse time (G93) without an F word" if inverse_time[k] else
                          "G1 with no feed rate (no F since the start or since G94)" if np.isnan(feed[k]) else
                          f"G1 with feed rate F{feed[k]:g}"))
     joints = position[keep]
-    duration = _durations(joints, scale[keep], rapid[keep], inverse_time[keep], feed[keep], position[0])
+    duration = _durations(joints, scale[keep], positioning[keep], inverse_time[keep], feed[keep], position[0])
     joints[:, 3:] = np.radians(joints[:, 3:])
     after = ReadState(read, reader.states[-1], reader.lengths, reader.selected, reader.work_offset,
                       reader.tolerance, reader.opened, reader.end_line, reader.stop_line, last_line, motion[-1],

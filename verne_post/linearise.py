@@ -78,9 +78,11 @@ class Blocks:
     tip: np.ndarray  # (M, 3) mm, table frame: the point on the CL path this block ends at
     axis: np.ndarray  # (M, 3) axis on the CL path (realised axis in the pole cone)
     pose: np.ndarray  # (M,) index of the CL pose whose move the block belongs to
-    fraction: np.ndarray  # (M,) position along that move, 1 at the CL pose
+    fraction: np.ndarray  # (M,) position along the move into that pose, 1 at the CL pose (moves between
+    #                       cuts that leave the pose, to a tool change or home: above 1)
     result: IKResult  # per block: joints (mm, rad), status, margins, alpha, ...
     unresolved: np.ndarray  # (K,) CL pose indices whose move could not be brought within tolerance
+    between: np.ndarray  # (M,) bool: a block of a move between cuts (verne_post.safe_motion)
 
     @property
     def joints(self) -> np.ndarray:
@@ -89,13 +91,14 @@ class Blocks:
     def rows(self, index: np.ndarray | slice) -> Blocks:
         """The blocks ``index`` (in that order)."""
         return Blocks(self.tip[index], self.axis[index], self.pose[index], self.fraction[index],
-                      self.result.rows(index), self.unresolved)
+                      self.result.rows(index), self.unresolved, self.between[index])
 
     def then(self, other: Blocks) -> Blocks:
         """These blocks, then those of ``other``."""
         return Blocks(np.concatenate([self.tip, other.tip]), np.concatenate([self.axis, other.axis]),
                       np.concatenate([self.pose, other.pose]), np.concatenate([self.fraction, other.fraction]),
-                      concatenate([self.result, other.result]), np.concatenate([self.unresolved, other.unresolved]))
+                      concatenate([self.result, other.result]), np.concatenate([self.unresolved, other.unresolved]),
+                      np.concatenate([self.between, other.between]))
 
     def shifted(self, first: int) -> Blocks:
         """The blocks of poses counted from ``first`` (a part of a program), counted from 0."""
@@ -193,4 +196,4 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     order = np.lexsort((all_frac, all_seg))
     merged = concatenate(results).rows(order)
     return Blocks(np.concatenate(tip)[order], np.concatenate(axis)[order], all_seg[order], all_frac[order], merged,
-                  np.unique(np.concatenate(unresolved)) if unresolved else np.empty(0, int))
+                  np.unique(np.concatenate(unresolved)) if unresolved else np.empty(0, int), np.zeros(len(order), bool))

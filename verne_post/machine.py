@@ -191,6 +191,41 @@ class GcodeConfig(BaseModel):
     block_number_step: Annotated[int, Field(ge=1, le=10**6)] = 10
 
 
+class JointPosition(BaseModel):
+    """A position of the machine in joint space: sliders rho1..3 in mm, theta1 and theta2 in degrees."""
+
+    model_config = _STRICT
+    rho1: Finite
+    rho2: Finite
+    rho3: Finite
+    theta1: Finite
+    theta2: Finite
+
+    def joints(self) -> np.ndarray:
+        """(5,) rho1..3 mm, theta1 and theta2 rad."""
+        return np.array([self.rho1, self.rho2, self.rho3, math.radians(self.theta1), math.radians(self.theta2)])
+
+
+class Positions(BaseModel):
+    """Where the machine starts and ends a program (``home``) and changes tools (``tool_change``)."""
+
+    model_config = _STRICT
+    home: JointPosition | None = None
+    tool_change: JointPosition | None = None
+
+
+class SafeConfig(BaseModel):
+    """How the machine moves between cuts (rapids, retracts, tool changes)."""
+
+    model_config = _STRICT
+    # deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches
+    max_turn_in_rapid: Annotated[float, Field(ge=0, le=180)] = 30.0
+    # mm: the safe level is this far above the program's highest feed point (table-frame z)
+    clearance: Annotated[float, Field(ge=0, le=MAX_MM)] = 10.0
+    # mm/min: a cap on the tool-tip speed relative to the part in rapids (None: the joint limits only)
+    rapid_feed: Annotated[float, Field(ge=1.0, le=1e8)] | None = None
+
+
 class Machine(BaseModel):
     """A whole machine file. Lengths mm, angles degrees (as written in the YAML)."""
 
@@ -204,7 +239,22 @@ class Machine(BaseModel):
     work_offset: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     gcode: GcodeConfig = GcodeConfig()
     timing: TimingConfig = TimingConfig()
+    safe: SafeConfig = SafeConfig()
+    positions: Positions = Positions()
     _source: str = PrivateAttr(default="verne.yaml")
+
+    @model_validator(mode="after")
+    def _positions_within_travel(self) -> Machine:
+        for which in ("home", "tool_change"):
+            position = getattr(self.positions, which)
+            if position is None:
+                continue
+            for name in ("rho1", "rho2", "rho3", "theta1", "theta2"):
+                limits, value = getattr(self.joints, name), getattr(position, name)
+                if not limits.continuous and not limits.min <= value <= limits.max:
+                    raise ValueError(f"positions.{which}.{name} = {value:g} is outside the travel of {name} "
+                                     f"({limits.min:g} to {limits.max:g})")
+        return self
 
     @property
     def source(self) -> str:

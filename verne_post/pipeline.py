@@ -46,11 +46,12 @@ from .helpers import Helper, VerifierProcess, available, outcome
 from .linearise import Blocks, linearise
 from .machine import Machine
 from .poses import MachinePoses, machine_poses
+from .safe_motion import SafeSettings, between_cuts
 from .schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import Dwell, Event, ToolChange
 from .topp import Engine
-from .verify import Reference, Verification, Verifier, verify_program
+from .verify import Reference, Verification, Verifier, feed_top, verify_program
 
 if TYPE_CHECKING:
     from .placement import Placement
@@ -66,6 +67,8 @@ class PostOptions:
     units: Literal["mm", "inch"] | None = None  # override the CL file's units
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
     axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
+    rapid_tol: float = 0.5  # mm: tool tip deviation from a CL rapid's straight line (never below it)
+    rapid_axis_tol: float = 0.5  # deg: tool axis deviation from a CL rapid's interpolated axis
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
     arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
@@ -110,7 +113,7 @@ class Figures:
         if len(finite):
             self.low, self.high = np.fmin(self.low, finite.min(axis=0)), np.fmax(self.high, finite.max(axis=0))
         self.blocks += len(joints)
-        self.inserted += int(np.sum(blocks.fraction[own] < 1))
+        self.inserted += int(np.sum(blocks.fraction[own] != 1))
         self.in_pole_cone += int(path.in_cone.sum())
         axis = poses.axis[first:first + len(path.axis)]
         self.cone_deviation = max(self.cone_deviation, float(np.max(
@@ -276,10 +279,34 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     lap("ik")
     blocks = _linearise(machine, poses, options, solved, until_failure=first_failure)
     lap("linearise")
-    rapid = poses.rapid[blocks.pose].copy()  # rapids are never split, so each is one block
+    between = between_cuts(machine, poses, blocks, _safe_settings(machine, poses, options), before=None,
+                           end=len(poses))
+    blocks = between.blocks
+    rapid = _rapid(poses, blocks)
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
     checks, others = _checks(machine, poses, options, solved.pair_switch, blocks, rapid)
+    others += _between_violations(poses, between.problems)
     return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
+
+
+def _rapid_speed(machine: Machine) -> float:
+    """mm/s: the tip speed limit of rapids (the machine file's ``safe.rapid_feed``, else none)."""
+    return NO_TIP_LIMIT if machine.safe.rapid_feed is None else machine.safe.rapid_feed / 60.0
+
+
+def _safe_settings(machine: Machine, poses: MachinePoses, options: PostOptions) -> SafeSettings:
+    return SafeSettings.of(machine, poses.tip, poses.rapid, rapid_tol=options.rapid_tol,
+                           rapid_axis_tol=np.radians(options.rapid_axis_tol), tol=options.tol,
+                           axis_tol=np.radians(options.axis_tol))
+
+
+def _rapid(poses: MachinePoses, blocks: Blocks) -> np.ndarray:
+    """Per block: a move between cuts (a CL rapid's, or one the safe-motion stage made)."""
+    return poses.rapid[blocks.pose] | blocks.between
+
+
+def _between_violations(poses: MachinePoses, problems: tuple[tuple[int, str], ...]) -> list[Violation]:
+    return [Violation(int(poses.line[pose]), "rapid", reason) for pose, reason in problems]
 
 
 def _solve(machine: Machine, poses: MachinePoses, options: PostOptions, state: BranchState | None = None,
@@ -360,14 +387,16 @@ class TimingTask:
     optimize: bool  # also the third-order programme (plan_feeds)
     workers: int
     figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
+    rapid_speed: float = NO_TIP_LIMIT  # mm/s: the tip speed limit of rapids (machine's safe.rapid_feed)
 
 
 def plan_timing(task: TimingTask) -> Timing:
     """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.schedule.plan_program`)."""
     start = time.perf_counter()
     try:
-        schedule = plan_program(task.joints, task.tip, task.rapid,
-                                _tip_speed(task.feed, task.inverse_time, task.tip, task.unplanned), task.group,
+        speed = np.where(task.rapid, task.rapid_speed, _tip_speed(task.feed, task.inverse_time, task.tip,
+                                                                   task.unplanned))
+        schedule = plan_program(task.joints, task.tip, task.rapid, speed, task.group,
                                 task.limits, rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
                                 engine=task.engine, optimize=task.optimize)
     except SequenceError as error:
@@ -465,6 +494,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
     state = BranchState()
     last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
     before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
+    safe = _safe_settings(machine, poses, options)
     first = 0
     while first < n:
         end = min(n, first + size)
@@ -490,7 +520,12 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         blocks, rapid = blocks.rows(slice(0, k)), rapid[:k]
         blocks = replace(blocks, unresolved=blocks.unresolved[blocks.unresolved < cut])
         path = solved.rows(slice(0, cut - first))
+        between = between_cuts(machine, poses, blocks, safe, before=None if before is None else before[0], end=cut)
+        blocks = between.blocks
+        rapid = _rapid(poses, blocks)
+        rapid[0] |= first == 0  # where the machine stands before the program is unknown: position with G0
         checks, others = _checks(machine, poses, options, path.pair_switch, blocks, rapid, first)
+        others += _between_violations(poses, between.problems)
         context = 0
         if before is not None:  # the move into this part, from the last block of the part before
             blocks, rapid, context = before[0].then(blocks), np.r_[before[1], rapid], 1
@@ -509,7 +544,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
                 blocks.joints, blocks.tip, rapid, poses.feed[blocks.pose], poses.inverse_time[blocks.pose],
                 poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
-                options.planner, options.optimize, options.workers, figures))
+                options.planner, options.optimize, options.workers, figures, _rapid_speed(machine)))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
@@ -601,7 +636,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
         warnings.append(_cone_warning(machine, options, poses.source))
     program = None
     if not violations:
-        figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction < 1)),
+        figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction != 1)),
                           time=float(np.sum(timing.duration)))
         program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, timing.duration,
                          _at_blocks(_events(poses), part.blocks))
@@ -666,7 +701,8 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
         verifier: Verifier | VerifierProcess | None = None
         if verify:
             settings = {"source": str(output), "tol": options.tol, "axis_tol": options.axis_tol,
-                        "work_offset": _offset(machine, options)}
+                        "work_offset": _offset(machine, options), "rapid_tol": options.rapid_tol,
+                        "top": feed_top(Reference.of(poses))}
             verifier = Verifier(machine, **settings) if verifying is None else verifying.start(**settings)
         return _post(machine, poses, options, placement, output, clock, planner, verifier, timing_figures, part_poses,
                      before_writing)
@@ -731,9 +767,10 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
                 own, last = part.own, part.end == len(poses)
                 blocks = part.blocks.rows(own)
                 mine = [e for e in events if part.first <= e.index < part.end or (last and e.index >= part.end)]
-                text = "".join(writer.body(Program(blocks.joints, part.rapid[own], timed.duration[own],
+                positioning = _positioning(len(blocks.pose), part.first == 0)
+                text = "".join(writer.body(Program(blocks.joints, positioning, timed.duration[own],
                                                    poses.line[blocks.pose], _at_blocks(mine, blocks),
-                                                   tool_lengths=tools)))
+                                                   tool_lengths=tools, between=part.rapid[own] & ~positioning)))
                 spool.write(text)
                 clock.lap("write")
                 if verifier is not None:
@@ -800,7 +837,8 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (
             "WORK OFFSET FROM " + ("THE MACHINE FILE" if options.work_offset is None else "THE USER"),)),
-        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; BLOCKS {figures.blocks} "
+        f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; RAPIDS {options.rapid_tol:g} MM "
+        f"{options.rapid_axis_tol:g} DEG; BLOCKS {figures.blocks} "
         f"(CL POINTS {len(poses)}, INSERTED {figures.inserted})",
         f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]})",
     )
@@ -810,8 +848,18 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
     if blocks is None:
         return Program(np.zeros((0, 5)), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64),
                        part_name=poses.part_name, header=header, tool_lengths=tools)
-    return Program(joints=blocks.joints, rapid=rapid, duration=duration, line=poses.line[blocks.pose], events=events,
-                   part_name=poses.part_name, header=header, tool_lengths=tools)
+    positioning = _positioning(len(blocks.pose), True)
+    return Program(joints=blocks.joints, rapid=positioning, duration=duration, line=poses.line[blocks.pose],
+                   events=events, part_name=poses.part_name, header=header, tool_lengths=tools,
+                   between=None if rapid is None else rapid & ~positioning)
+
+
+def _positioning(blocks: int, start: bool) -> np.ndarray:
+    """Which blocks are G0: the program's first (``start``), the move from wherever the machine
+    stands; every other move is planned and certified, between cuts too."""
+    positioning = np.zeros(blocks, bool)
+    positioning[:1] = start
+    return positioning
 
 
 _TIME_BASIS = {True: "PLANNED: FEEDS, JOINT VELOCITY, ACCELERATION AND JERK LIMITS",
@@ -833,7 +881,8 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
     text = program_text(result.program, fmt)
     offset = result.placement.offset if result.placement is not None else _offset(machine, options)
     verification = verify_program(text, machine, source=str(path), against=Reference.of(result.poses),
-                                  work_offset=offset, tol=options.tol, axis_tol=options.axis_tol)
+                                  work_offset=offset, tol=options.tol, axis_tol=options.axis_tol,
+                                  rapid_tol=options.rapid_tol)
     if verification.ok:
         write_text(with_header_line(text, verification.certificate()), path)
     return verification

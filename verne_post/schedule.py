@@ -4,8 +4,11 @@ A feed sequence is a run of feed blocks between rapids, tool changes, feed-mode 
 corners sharper than ``timing.corner_angle`` (in joint space weighted by the velocity limits);
 each is planned from rest to rest with the programmed feed as the tool-tip speed limit, the
 joint velocity, acceleration and jerk limits (``verne_post.feed_planner.plan_feeds``, all the
-sequences at once). Each rapid is a jerk-limited, phase-synchronised ruckig move from rest to
-rest. Units: s, mm, rad.
+sequences at once). A move between cuts (:mod:`verne_post.safe_motion`: a rapid kept on its
+line, a retract, reorientation or approach) is split the same way into rapid sequences, planned
+alike at the joint limits with only the optional rapid tip-speed cap (and no rotary feed on
+turns with the tip still); a rapid sequence of one block is a jerk-limited, phase-synchronised
+ruckig move from rest to rest. Units: s, mm, rad.
 """
 
 from __future__ import annotations
@@ -73,14 +76,16 @@ def _split(items: list, work: np.ndarray, parts: int) -> list[list]:
     return [items[a:b] for a, b in itertools.pairwise(bounds)]
 
 
-def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, limits: Limits, corner: float
-                   ) -> list[tuple[int, int]]:
-    """(first, last) block ranges of feed sequences; ``group`` ids (tool, feed mode) split them too."""
+def feed_sequences(joints: np.ndarray, rapid: np.ndarray, group: np.ndarray, limits: Limits, corner: float,
+                   of_rapids: bool = False) -> list[tuple[int, int]]:
+    """(first, last) block ranges of feed sequences (``of_rapids``: of rapid sequences, block 0,
+    the positioning move from where the machine stands, left out); ``group`` ids (tool, feed
+    mode) split them too."""
     weighted = np.diff(joints, axis=0) / limits.velocity
     unit = weighted / np.maximum(np.linalg.norm(weighted, axis=1, keepdims=True), 1e-300)
     turn = np.zeros(len(joints))  # angle between the motion into block m and into block m - 1
     turn[2:] = np.arccos(np.clip(np.sum(unit[1:] * unit[:-1], axis=1), -1.0, 1.0))
-    feed = np.r_[False, ~rapid[1:]]
+    feed = np.r_[False, rapid[1:] if of_rapids else ~rapid[1:]]
     starts = feed & ~np.r_[False, feed[:-1]]
     starts[1:] |= feed[1:] & (group[1:] != group[:-1])
     starts |= feed & (turn > corner)
@@ -102,11 +107,16 @@ def _plan_sequences(task: tuple[list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     return [(p.reason, p.index) if isinstance(p, PlanningError) else p for p in plans]
 
 
+#: rad/s: the rotary speed limit of rapid sequences' turns on the spot: only the joint limits.
+RAPID_ANGULAR_FEED = 1e9
+
+
 def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: np.ndarray, group: np.ndarray,
                  limits: Limits, *, rotary_feed: float, corner: float, workers: int = 1, jerk: bool = True,
                  engine: Engine = "copp", optimize: bool = False) -> Schedule:
     """Durations of M blocks: joints (M, 5) mm/rad, tip (M, 3) mm relative to the part, feed
-    (M,) mm/s (maximum tip speed of the motion into each block), rotary_feed rad/s, corner rad.
+    (M,) mm/s (maximum tip speed of the motion into each block; on rapids their cap),
+    rotary_feed rad/s, corner rad.
 
     Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
     processes (same results). ``jerk=False`` leaves out the jerk limits of feed moves (for
@@ -138,7 +148,16 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
             raise SequenceError(reason, first if index is None else first - 1 + int(index))
         duration[first:last + 1] = plan.durations
         planned.append((first, last, False, plan))
-    for m in np.flatnonzero(rapid[1:]) + 1:
+    rapid_ranges = feed_sequences(joints, rapid, group, limits, corner, of_rapids=True)
+    runs = [(a, b) for a, b in rapid_ranges if b > a]
+    rapid_plans = plan_feeds([(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in runs], limits,
+                             angular_feed=RAPID_ANGULAR_FEED, max_turn=corner + 1e-9, jerk=True, engine=engine)
+    for (first, last), plan in zip(runs, rapid_plans, strict=True):
+        if not isinstance(plan, FeedPlan):
+            raise SequenceError(plan.reason, first if plan.index is None else first - 1 + int(plan.index))
+        duration[first:last + 1] = plan.durations
+        planned.append((first, last, True, plan))
+    for m, _ in (r for r in rapid_ranges if r[1] == r[0]):
         plan = plan_rapid(joints[m - 1], joints[m], limits)
         duration[m] = plan.duration
         planned.append((int(m), int(m), True, plan))

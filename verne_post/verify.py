@@ -59,6 +59,10 @@ FIRST_INTERVALS = 3
 MAX_INTERVALS = 256
 SAMPLING_SHARE = 0.1
 RAPID_INTERVALS = 32
+DEFAULT_RAPID_TOL = 0.5  # mm: a rapid's tip from its CL line, when neither caller nor header gives one
+#: mm: how far below its CL line a rapid may pass: the rounding of the written joints and the
+#: forward kinematics' convergence, no more (a rapid never approaches the part on the way).
+RAPID_DIP_TOL = 1e-3
 #: mm: a DELTA comment further than this from spindle nose + LENGTH is a finding (the joints
 #: were computed for another tool length, which moves the tip by that much along the axis).
 DELTA_TOL = 1e-3
@@ -146,6 +150,13 @@ class Verification:
     peak_feed_ratio: float | None  # the same for the fastest sample interval within a block (information)
     joint_speed_ratio: dict[str, float | None]  # largest joint velocity over its limit, G1 blocks
     smallest_margins: dict[str, float | None]
+    rapid_tol: float = DEFAULT_RAPID_TOL  # mm
+    # mm: with the CL path, the largest distance of a rapid's tip from where it may be (its CL line,
+    # not below it; a retract or approach ray along a CL pose's axis; or above every feed point)
+    rapid_deviation: float | None = None
+    # mm: with the CL path, the largest dip below a rapid's CL line; without, below the lower end
+    # of each run of rapid blocks
+    rapid_dip: float | None = None
 
     @property
     def ok(self) -> bool:
@@ -157,6 +168,8 @@ class Verification:
         if self.tip_deviation is not None and self.axis_deviation is not None:
             parts.append(f"MAX TIP DEVIATION {self.tip_deviation:.4f} MM, MAX AXIS DEVIATION "
                          f"{self.axis_deviation:.3f} DEG,")
+        if self.rapid_deviation is not None:
+            parts.append(f"MAX RAPID DEVIATION {self.rapid_deviation:.4f} MM,")
         parts.append("ALL LIMITS HELD")
         return " ".join(parts)
 
@@ -179,6 +192,9 @@ class Verification:
             "max_feed_ratio": _number(self.feed_ratio),
             "max_feed_ratio_within_a_block": _number(self.peak_feed_ratio),
             "max_joint_speed_ratio": {k: _number(v) for k, v in self.joint_speed_ratio.items()},
+            "rapid_tol_mm": self.rapid_tol,
+            "max_rapid_deviation_mm": _number(self.rapid_deviation),
+            "max_rapid_dip_mm": _number(self.rapid_dip),
             "smallest_margins": {k: _number(v) for k, v in self.smallest_margins.items()},
         }
 
@@ -190,7 +206,7 @@ def _number(value: float | None) -> float | None:
 def verify_program(text: str | Iterable[str], machine: Machine, *, source: str = "<program>",
                    against: Toolpath | Reference | None = None,
                    work_offset: tuple[float, float, float] | None = None, tol: float | None = None,
-                   axis_tol: float | None = None) -> Verification:
+                   axis_tol: float | None = None, rapid_tol: float | None = None) -> Verification:
     """Verify program text (one string or its lines) for ``machine``; see the module docstring.
 
     ``against``: the CL path, as read (part frame: the work offset is ``work_offset``, else the
@@ -199,22 +215,35 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
     Raises :class:`~verne_post.errors.InputError` for text that is not a program it can read.
     """
     program = read_gcode(text, source)
-    header_tol = program.tolerance or (None, None)
+    header_tol = program.tolerance or (None, None, math.nan)
     tol = float(tol if tol is not None else header_tol[0] if header_tol[0] is not None else DEFAULT_TOL)
     axis_tol = float(axis_tol if axis_tol is not None else header_tol[1] if header_tol[1] is not None
                      else DEFAULT_AXIS_TOL)
-    if not (0 < tol < math.inf and 0 < axis_tol < math.inf):  # a header's 0 would match nothing, or all
-        raise InputError(f"the tolerances must be positive numbers, not {tol:g} mm and {axis_tol:g} deg",
-                         source=source)
+    rapid_tol = float(rapid_tol if rapid_tol is not None else header_tol[2] if math.isfinite(header_tol[2])
+                      else DEFAULT_RAPID_TOL)
+    if not (0 < tol < math.inf and 0 < axis_tol < math.inf and 0 < rapid_tol < math.inf):
+        # a header's 0 would match nothing, or all
+        raise InputError(f"the tolerances must be positive numbers, not {tol:g} mm, {axis_tol:g} deg and "
+                         f"{rapid_tol:g} mm", source=source)
     offset = tuple(work_offset or program.work_offset or machine.work_offset)
     reference = against if isinstance(against, Reference) or against is None else Reference.of(against, offset)
-    return verify_blocks(program, machine, reference, tol, axis_tol, offset)
+    return verify_blocks(program, machine, reference, tol, axis_tol, offset, rapid_tol=rapid_tol,
+                         top=None if reference is None else feed_top(reference))
+
+
+def feed_top(reference: Reference) -> float:
+    """mm, table-frame z: the highest feed point of a CL path (of any point, if it has no feed)."""
+    feed = reference.tip[~reference.rapid] if (~reference.rapid).any() else reference.tip
+    return float(np.max(feed[:, 2])) if len(feed) else -math.inf
 
 
 def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
                   axis_tol: float, work_offset: Iterable[float] = (0.0, 0.0, 0.0), *, overlap: bool = False,
-                  final: bool = True) -> Verification:
-    """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg).
+                  final: bool = True, rapid_tol: float = DEFAULT_RAPID_TOL, top: float | None = None
+                  ) -> Verification:
+    """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg,
+    rapid_tol mm; ``top``: the highest feed point of the whole CL path, table-frame z mm, above
+    which a rapid may go anywhere; default: the reference's).
 
     A part of a program (:class:`Verifier`): with ``overlap`` the first block and the first CL
     pose are the last ones of the part before, already verified: only the motion from there
@@ -236,10 +265,15 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     speed_ratio = _joint_speed(program, machine, findings)
     tip_dev = axis_dev = feed_ratio = peak_ratio = None
     reached = None
+    rapid_dev: float | None
+    rapid_dip: float | None
     skip = int(overlap)
     if reference is not None:
-        tip_dev, axis_dev, feed_ratio, peak_ratio, reached = _against(program, machine, reference, motion,
-                                                                      tol, np.radians(axis_tol), findings, skip)
+        tip_dev, axis_dev, feed_ratio, peak_ratio, reached, rapid_dev, rapid_dip = _against(
+            program, machine, reference, motion, tol, np.radians(axis_tol), findings, skip, rapid_tol,
+            feed_top(reference) if top is None else top)
+    else:
+        rapid_dev, rapid_dip = None, _run_dips(program, motion, rapid_tol, findings)
     if overlap:  # what the part before found at its last block
         findings = [f for f in findings if f.line != program.line[0]]
     x, y, z = work_offset
@@ -257,6 +291,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
         feed_ratio=feed_ratio, peak_feed_ratio=peak_ratio, joint_speed_ratio=speed_ratio,
         smallest_margins={name: _nanmin(getattr(margins, name)) for name in
                           ("serial", "parallel", "machine", "rod_clearance")},
+        rapid_tol=rapid_tol, rapid_deviation=rapid_dev, rapid_dip=rapid_dip,
     )
 
 
@@ -272,9 +307,11 @@ class Verifier:
     """
 
     def __init__(self, machine: Machine, *, source: str, tol: float, axis_tol: float,
-                 work_offset: tuple[float, float, float]) -> None:
+                 work_offset: tuple[float, float, float], rapid_tol: float = DEFAULT_RAPID_TOL,
+                 top: float | None = None) -> None:
         self.machine, self.source, self.tol, self.axis_tol, self.work_offset = (machine, source, tol, axis_tol,
                                                                                  work_offset)
+        self.rapid_tol, self.top = rapid_tol, top  # mm; the whole program's highest feed point (table z)
         self.state: ReadState | None = None
         self.last: GcodeProgram | None = None  # the last block so far (one row)
         self.pending: Reference | None = None  # poses not yet verified: the last one reached, and any after
@@ -289,14 +326,14 @@ class Verifier:
             reference = self.pending.then(reference)
         if len(program) == 0 and not final:
             self.parts.append(verify_blocks(program, self.machine, None, self.tol, self.axis_tol, self.work_offset,
-                                            final=False))
+                                            final=False, rapid_tol=self.rapid_tol, top=self.top))
             self.pending = reference
             return
         overlap = self.last is not None
         if overlap:
             program = _joined_program(self.last, program)
         self.parts.append(verify_blocks(program, self.machine, reference, self.tol, self.axis_tol, self.work_offset,
-                                        overlap=overlap, final=final))
+                                        overlap=overlap, final=final, rapid_tol=self.rapid_tol, top=self.top))
         if len(program):
             self.last = _last_block(program)
         if reference is not None and len(reference.tip):
@@ -335,6 +372,7 @@ class Verifier:
             cl_points=total("cl_points"), cl_points_reached=total("cl_points_reached"),
             feed_ratio=most("feed_ratio"), peak_feed_ratio=most("peak_feed_ratio"),
             joint_speed_ratio=per_name("joint_speed_ratio", max), smallest_margins=per_name("smallest_margins", min),
+            rapid_tol=self.rapid_tol, rapid_deviation=most("rapid_deviation"), rapid_dip=most("rapid_dip"),
         )
 
 
@@ -607,7 +645,7 @@ def _joint_speed(program: GcodeProgram, machine: Machine, findings: list[Finding
     limit = np.array([getattr(machine.joints, name).velocity for name in JOINT_NAMES])  # mm/s, deg/s
     limit[3:] = np.radians(limit[3:])
     step = np.abs(np.diff(program.joints, axis=0, prepend=np.full((1, 5), np.nan)))
-    timed = ~program.rapid & (program.duration > 0)
+    timed = program.duration > 0  # G1 blocks, between cuts too; G0 runs at the controller's speeds
     with np.errstate(invalid="ignore"):
         ratio = np.where(timed[:, None], step / np.where(timed, program.duration, 1.0)[:, None] / limit, np.nan)
     for j in range(5):
@@ -791,12 +829,12 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
 
 
 def _against(program: GcodeProgram, machine: Machine, reference: Reference, motion: _Motion, tol: float,
-             axis_tol: float, findings: list[Finding], skip: int = 0
-             ) -> tuple[float, float, float | None, float | None, int]:
-    """Reach, order, deviation and feed findings; returns the largest tip deviation (mm), axis
-    deviation (deg), feed ratio, peak feed ratio within a block and the number of CL points
+             axis_tol: float, findings: list[Finding], skip: int, rapid_tol: float, top: float
+             ) -> tuple[float, float, float | None, float | None, int, float | None, float | None]:
+    """Reach, order, deviation, rapid and feed findings; returns the largest tip deviation (mm),
+    axis deviation (deg), feed ratio, peak feed ratio within a block, the number of CL points
     reached (of those after the first ``skip``: the first ``skip`` blocks and poses were
-    verified with the part before)."""
+    verified with the part before), the largest rapid deviation and dip (mm, :func:`_rapids`)."""
     m_blocks = len(program)
     lines, cl_lines = program.line, reference.line
     ends = motion.ends
@@ -821,7 +859,7 @@ def _against(program: GcodeProgram, machine: Machine, reference: Reference, moti
                                 cl_line=int(cl_lines[pieces.last[m]])))
     follows = ~program.rapid[curves.moves] & ~cl_rapid[curves.moves]
     inner_follows = np.repeat(follows, curves.n - 1)
-    end_blocks = np.flatnonzero(motion.known & ends.reachable)
+    end_blocks = np.flatnonzero(motion.known & ends.reachable & ~program.rapid)  # rapids: _rapids
     end_blocks = end_blocks[end_blocks >= skip]
     point_block = np.r_[end_blocks, curves.block[inner_follows]]
     point_tip = np.concatenate([ends.tip[end_blocks], curves.samples.tip[inner_follows]])
@@ -845,8 +883,126 @@ def _against(program: GcodeProgram, machine: Machine, reference: Reference, moti
                                 cl_line=int(cl_lines[nearest[k]]), value=float(np.degrees(axis_total[k])),
                                 limit=float(np.degrees(axis_tol))))
     feed_ratio, peak_ratio = _feed(program, reference, machine, matched, pieces, curves, follows, findings)
+    rapid_dev, rapid_dip = _rapids(program, reference, motion, pieces, skip, rapid_tol, top, findings)
     return (float(tip_total.max(initial=0.0)), float(np.degrees(axis_total.max(initial=0.0))), feed_ratio,
-            peak_ratio, int(np.count_nonzero(matched[skip:] >= 0)))
+            peak_ratio, int(np.count_nonzero(matched[skip:] >= 0)), rapid_dev, rapid_dip)
+
+
+def _below_line(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """mm (>= 0): how far each point lies below the segment a -> b (table frame): below the line
+    in the line's vertical plane (perpendicular to the line, toward -z), or below its lower end."""
+    d = b - a
+    horizontal = np.hypot(d[:, 0], d[:, 1])
+    length = np.linalg.norm(d, axis=1)
+    # the upward normal of the line in its vertical plane: (-dz dx/h, -dz dy/h, h) / |d|
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normal = np.column_stack([-d[:, 2] * d[:, 0] / horizontal, -d[:, 2] * d[:, 1] / horizontal, horizontal]
+                                 ) / length[:, None]
+    sloped = (horizontal > 1e-6 * length) & (length > 1e-9)
+    below = np.where(sloped, -np.sum((point - a) * np.where(sloped[:, None], normal, 0.0), axis=1), 0.0)
+    return np.maximum(np.maximum(below, np.minimum(a[:, 2], b[:, 2]) - point[:, 2]), 0.0)
+
+
+def _from_ray(point: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """mm: distance of each point from the ray from ``origin`` along the unit ``direction``."""
+    along = np.maximum(np.sum((point - origin) * direction, axis=1), 0.0)
+    return np.linalg.norm(point - origin - along[:, None] * direction, axis=1)
+
+
+def _rapids(program: GcodeProgram, reference: Reference, motion: _Motion, pieces: _Pieces, skip: int,
+            rapid_tol: float, top: float, findings: list[Finding]) -> tuple[float | None, float | None]:
+    """Rapid findings against the CL path, from the block ends and samples of the rapid blocks.
+
+    A rapid's tip may be on the CL rapid's straight line (within ``rapid_tol`` mm, never more
+    than :data:`RAPID_DIP_TOL` below it), on a retract or approach ray (a CL pose's tool axis
+    from its tip outward, within ``rapid_tol``), or above every feed point of the program (z at
+    least ``top``, table frame); the sampling bound of each move counts against it. Returns the
+    largest distance from where a rapid may be and the largest dip below its CL line (mm) of the
+    points judged by their line, None without rapids."""
+    ends, curves = motion.ends, motion.curves
+    blocks = np.flatnonzero(program.rapid & motion.known & ends.reachable)
+    blocks = blocks[blocks >= skip]
+    inner = np.repeat(program.rapid[curves.moves], curves.n - 1)
+    block = np.r_[blocks, curves.block[inner]]
+    if block.size == 0:
+        return None, None
+    point = np.concatenate([ends.tip[blocks], curves.samples.tip[inner]])
+    bound = np.r_[np.zeros(len(blocks)), np.repeat(motion.bound_tip, curves.n - 1)[inner]]
+    known = np.isfinite(point).all(axis=1)  # an unreachable sample is a finding of its own
+    block, point, bound = block[known], point[known], bound[known]
+    owner, a, b = pieces.pairs(block)
+    at, ref = point[owner], reference.tip
+    line = distance_to_segment(at, ref[a], ref[b]) + bound[owner]
+    dip = _below_line(at, ref[a], ref[b]) + bound[owner]
+    ray = np.minimum(_from_ray(at, ref[a], reference.axis[a]), _from_ray(at, ref[b], reference.axis[b])) + bound[owner]
+    count = len(block)
+    on_line = np.full(count, np.inf)
+    np.minimum.at(on_line, owner, np.where(dip <= RAPID_DIP_TOL, line, np.inf))
+    on_ray, nearest_line, least_dip = np.full(count, np.inf), np.full(count, np.inf), np.full(count, np.inf)
+    np.minimum.at(on_ray, owner, ray)
+    np.minimum.at(nearest_line, owner, line)
+    np.minimum.at(least_dip, owner, dip)
+    above = point[:, 2] - bound >= top
+    deviation = np.where(above, 0.0, np.minimum(on_line, on_ray))
+    judged = ~above & (on_ray > rapid_tol)  # points that only their CL line can justify
+    last = pieces.last[block]
+    for k in _worst_per_block(block, deviation - rapid_tol):
+        findings.append(Finding(int(program.line[block[k]]), "rapid", f"rapid tool tip {nearest_line[k]:.4f} mm "
+                                f"from its CL line and {least_dip[k]:.4f} mm below it (max {rapid_tol:g} mm and "
+                                f"none below), on no retract ray and below the highest feed point",
+                                cl_line=int(reference.line[last[k]]), value=float(min(deviation[k], 1e300)),
+                                limit=rapid_tol))
+    return (float(np.max(np.where(np.isfinite(deviation), deviation, nearest_line))),
+            float(np.max(np.where(judged, least_dip, 0.0), initial=0.0)))
+
+
+#: rad: a run of marked rapid blocks whose tip path turns more than this is two rapids there (a
+#: retract, then a travel).
+RAPID_CORNER = np.radians(45.0)
+#: mm: a block whose tip moves less than this has no direction (a turn with the tip still).
+RAPID_STILL = 0.01
+
+
+def _run_dips(program: GcodeProgram, motion: _Motion, rapid_tol: float, findings: list[Finding]) -> float | None:
+    """Without the CL path: each rapid, from the block end before it to its last, judged by its
+    largest dip below the lower of those two ends (mm; a finding where it exceeds ``rapid_tol``).
+    A rapid is a G0 block, or a run of G1 blocks marked ``(RAPID)`` up to a corner of its tip
+    path (:data:`RAPID_CORNER`). Returns the largest dip, None without rapid moves."""
+    curves = motion.curves
+    rapid_moves = np.flatnonzero(program.rapid[curves.moves])
+    if rapid_moves.size == 0:
+        return None
+    chord = np.diff(motion.ends.tip, axis=0, prepend=motion.ends.tip[:1])
+    size = np.linalg.norm(chord, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos = np.sum(chord[1:] * chord[:-1], axis=1) / (size[1:] * size[:-1])
+    # a block whose tip hardly moves (a turn on the spot) has no direction: no corner at it
+    still = size < RAPID_STILL
+    corner = np.r_[False, (np.nan_to_num(cos, nan=1.0) < np.cos(RAPID_CORNER)) & ~still[1:] & ~still[:-1]]
+    alone = np.isnan(program.duration)  # a G0 block is a rapid of its own
+    joined = program.rapid[1:] & program.rapid[:-1] & ~alone[1:] & ~alone[:-1] & ~corner[1:]
+    run_of_block = np.cumsum(np.r_[True, ~joined]) - 1
+    run = run_of_block[curves.moves[rapid_moves]]
+    runs, run = np.unique(run, return_inverse=True)
+    z = curves.tip[:, 2]
+    start, stop = curves.start[rapid_moves], curves.start[rapid_moves] + curves.n[rapid_moves]
+    lowest = np.full(len(runs), np.inf)
+    count = curves.n[rapid_moves] + 1
+    for_points = np.repeat(run, count)
+    points = np.repeat(start, count) + _ranks(count)
+    np.fmin.at(lowest, for_points, z[points] - np.repeat(motion.bound_tip[rapid_moves], curves.n[rapid_moves] + 1))
+    first = np.full(len(runs), len(z))
+    np.minimum.at(first, run, start)
+    final = np.zeros(len(runs), int)
+    np.maximum.at(final, run, stop)
+    dip = np.maximum(np.fmin(z[first], z[final]) - lowest, 0.0)
+    first_block = np.full(len(runs), len(program.line))
+    np.minimum.at(first_block, run, curves.moves[rapid_moves])
+    for k in np.flatnonzero(dip > rapid_tol):
+        findings.append(Finding(int(program.line[first_block[k]]), "rapid", f"rapid dips {dip[k]:.4f} mm below "
+                                f"the lower of its ends (max {rapid_tol:g} mm)", value=float(dip[k]),
+                                limit=rapid_tol))
+    return float(np.nan_to_num(dip, nan=0.0).max(initial=0.0))
 
 
 def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: np.ndarray, tol: float,
@@ -930,7 +1086,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
     # inverse time: whole CL moves between two reached poses
     k = np.flatnonzero(reference.inverse_time[1:] & (matched[1:] >= 0) & (matched[:-1] >= 0)
                        & (np.linalg.norm(np.diff(reference.tip, axis=0), axis=1) >= STILL_TIP)) + 1
-    elapsed = np.r_[0.0, np.cumsum(np.where(program.rapid, 0.0, np.nan_to_num(program.duration)))]
+    elapsed = np.r_[0.0, np.cumsum(np.nan_to_num(program.duration))]
     taken = elapsed[matched[k] + 1] - elapsed[matched[k - 1] + 1]
     with np.errstate(divide="ignore"):
         inverse_ratio = 60.0 / reference.feed[k] / taken

@@ -1,0 +1,542 @@
+"""Stage 4b: the moves between cuts, kept safe as the tool tip moves relative to the part.
+
+The controller interpolates the joints linearly. On the VERNE a straight line in joint space is
+a curve at the tool tip: a joint-space rapid between two clearance points at the same height
+sags below them (19 mm on a 3-axis z-level job), and one that turns the tool axis swings it
+through the part. So no move between cuts is left to the joint interpolation:
+
+- **A CL rapid** whose tool axis turns by at most ``safe.max_turn_in_rapid`` (and on the same
+  angle pair) runs on the CAM's straight line: the tip linear, the axis by spherical
+  interpolation, split in joint space until the tip stays within ``rapid_tol`` (mm) and the
+  axis within ``rapid_axis_tol``, like a feed move. It never leaves the line downward (toward
+  the part): its interior block ends are lifted by half the tolerance above the line (along
+  the line's upward normal in its vertical plane, reached within a short ramp at each end),
+  and a block whose joint interpolation dips below the line is split further.
+- **Retract, reorient, approach** where the axis turns more, the angle pair changes, or the
+  straight line leaves the machine's limits: retract along the current tool axis to the safe
+  level (``safe.clearance`` above the program's highest feed point, table-frame z), turn the
+  tool axis there with the tip held still (the rotary joints move about linearly, the sliders
+  keep the tip in place: the table turns about the tip; crossing the pole where the angle pair
+  changes), travel at that level, descend along the new tool axis. Retract and approach keep
+  the feed tolerances (``tol``, ``axis_tol``): the tool leaves or enters the cut's surroundings.
+- **Start, tool changes, end** go through the same logic from and to the machine file's
+  joint-space ``positions.home`` and ``positions.tool_change``, reached exactly. Without a
+  ``tool_change`` position the tool is changed where the retract leaves it, high enough that
+  the new tool's tip is at the safe level too; without ``home`` the program starts over its
+  first pose at the safe level.
+
+Blocks of a rapid into CL pose k have ``pose`` k and fractions in (0, 1); the retract and move
+to the tool-change position (with the old tool) or home after the program's last pose belong
+to the pose they leave, with fractions in (1, 2]. Units: mm and rad, table frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .api import IKResult, Status, concatenate, forward_kinematics
+from .branch import solve_with_theta2
+from .kinematics import axis_from_angles, wrap_angle
+from .linearise import Blocks, angle_to_arc, distance_to_segment, slerp
+from .machine import Machine
+from .poses import MachinePoses
+from .toolpath import ToolChange
+
+#: Splitting aims at this share of each tolerance (as the feed moves' linearisation does).
+MARGIN = 0.8
+#: mm: the dip below its line that splits a rapid block further (the joint chords of the block
+#: ends, lifted half the tolerance above the line, otherwise sag toward it near the ends).
+DIP_SPLIT = 1e-4
+MAX_LEVELS = 24
+#: Inserted points at most per leg: past it the leg is unresolved (a rapid line then falls back
+#: to retract / reorient / approach; an unresolved leg of that is a violation).
+MAX_POINTS_PER_LEG = 2000
+#: The sag of a block at a ramp counts this much more than measured (it is sampled, and not
+#: exactly parabolic).
+SAG_FACTOR = 1.25
+#: Fractions of a block where its deviation is measured while splitting.
+MEASURE = np.array([0.25, 0.5, 0.75])
+#: mm: legs shorter than this, and turns below 1e-9 rad, are left out.
+SHORT = 1e-6
+
+
+@dataclass(frozen=True)
+class SafeSettings:
+    """What the moves between cuts must keep to: mm and rad, table frame."""
+
+    rapid_tol: float  # mm: tip from the CL rapid's line
+    rapid_axis_tol: float  # rad
+    tol: float  # mm: retract and approach (the feed tolerance)
+    axis_tol: float  # rad
+    max_turn: float  # rad: a larger axis turn in a rapid retracts, reorients, approaches
+    level: float  # mm, table-frame z: the safe level
+    cone: float  # rad: the pole cone of the branch stage
+    home: np.ndarray | None  # (5,) mm, rad
+    tool_change: np.ndarray | None  # (5,) mm, rad
+
+    @classmethod
+    def of(cls, machine: Machine, tip: np.ndarray, rapid: np.ndarray, *, rapid_tol: float, rapid_axis_tol: float,
+           tol: float, axis_tol: float) -> SafeSettings:
+        """Settings of a program with CL tips (N, 3) mm, table frame, and rapid flags (N,):
+        the safe level is ``safe.clearance`` above its highest feed point (or any point, when it has
+        no feed move); tolerances in mm and rad."""
+        feed = tip[~rapid] if (~rapid).any() else tip
+        top = float(np.max(feed[:, 2])) if len(feed) else 0.0
+        positions = machine.positions
+        return cls(rapid_tol, rapid_axis_tol, tol, axis_tol, np.radians(machine.safe.max_turn_in_rapid),
+                   top + machine.safe.clearance, np.radians(machine.pole.cone),
+                   None if positions.home is None else positions.home.joints(),
+                   None if positions.tool_change is None else positions.tool_change.joints())
+
+
+def upward_normal(tip0: np.ndarray, tip1: np.ndarray) -> np.ndarray:
+    """(L, 3): the unit normal of each segment (mm) in its vertical plane pointing up (+z), zero
+    for a vertical or zero-length segment."""
+    span = tip1 - tip0
+    size = np.linalg.norm(span, axis=1, keepdims=True)
+    d = span / np.where(size > 0, size, 1.0)
+    n = np.array([0.0, 0.0, 1.0]) - d[:, 2:3] * d
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where((norm > 1e-6) & (size > SHORT), n / np.where(norm > 0, norm, 1.0), 0.0)
+
+
+def dip_below(point: np.ndarray, tip0: np.ndarray, tip1: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """How far (mm, >= 0) each point lies below its segment tip0 -> tip1 (table frame): under
+    the line along its upward normal ``up`` (:func:`upward_normal`; 0 for a vertical segment),
+    or below the segment's lower end."""
+    under_line = -np.sum((point - tip0) * up, axis=1)
+    under_end = np.minimum(tip0[:, 2], tip1[:, 2]) - point[:, 2]
+    return np.maximum(np.maximum(under_line, under_end), 0.0)
+
+
+@dataclass(frozen=True)
+class State:
+    """Where a leg starts or ends, one row per leg: the IK result (joints mm and rad, tilt alpha,
+    status, margins), the tip (mm) and the axis (table frame) for the leg's tool."""
+
+    result: IKResult
+    tip: np.ndarray
+    axis: np.ndarray
+
+    @property
+    def joints(self) -> np.ndarray:
+        return self.result.joints
+
+    def rows(self, index: np.ndarray) -> State:
+        return State(self.result.rows(index), self.tip[index], self.axis[index])
+
+    def where(self, mask: np.ndarray, other: State) -> State:
+        """Rows of ``self`` where ``mask``, of ``other`` elsewhere."""
+        return State(self.result.take(mask, other.result), np.where(mask[:, None], self.tip, other.tip),
+                     np.where(mask[:, None], self.axis, other.axis))
+
+    @staticmethod
+    def join(states: list[State]) -> State:
+        return State(concatenate([s.result for s in states]), np.concatenate([s.tip for s in states]),
+                     np.concatenate([s.axis for s in states]))
+
+
+def _solve(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray, theta2: np.ndarray,
+           cone: float) -> State:
+    """Working-mode IK with theta2 near ``theta2`` (rad): the state at each pose (mm, table frame)."""
+    if len(tip) == 0:
+        empty = solve_with_theta2(machine, np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros(1), np.zeros(1),
+                                  cone)[0]
+        return State(empty.rows(np.zeros(0, int)), np.zeros((0, 3)), np.zeros((0, 3)))
+    result, realised = solve_with_theta2(machine, tip, axis, lengths, theta2, cone)
+    return State(result, tip, realised)
+
+
+def at_joints(machine: Machine, joints: np.ndarray, lengths: np.ndarray, cone: float) -> State:
+    """The state at given joints (K, 5) (mm, rad) with tools of ``lengths`` (K,) mm: tip and axis
+    by the forward kinematics, the IK result (margins, status) with exactly these joints."""
+    fk = forward_kinematics(machine, joints, tool_length=lengths)
+    state = _solve(machine, np.nan_to_num(fk.tip), fk.axis, lengths, joints[:, 4], cone)
+    return State(state.result.with_joints(joints.copy()), fk.tip, fk.axis)
+
+
+@dataclass(frozen=True)
+class Legs:
+    """Straight pieces of the moves between cuts, L of them: the tip on the segment ``tip0`` ->
+    ``tip1`` (lifted by ``lift`` mm along ``up`` in the interior), the axis by spherical
+    interpolation, or, where ``reorient``, along the rotary angles (phi1, phi2) from ``phi0`` to
+    ``phi1`` (rad) with the tip still; block fractions ``f0`` -> ``f1`` of CL pose ``pose``."""
+
+    start: State
+    end: State
+    tip0: np.ndarray  # (L, 3) mm: the leg's line (before any lift)
+    tip1: np.ndarray
+    axis0: np.ndarray  # (L, 3)
+    axis1: np.ndarray
+    up: np.ndarray  # (L, 3): unit upward normal of the line in its vertical plane (0: vertical)
+    lift: np.ndarray  # (L,) mm
+    guard: np.ndarray  # (L,) bool: split where the tip dips below the line
+    reorient: np.ndarray  # (L,) bool
+    phi0: np.ndarray  # (L, 2) rad
+    phi1: np.ndarray
+    tol: np.ndarray  # (L,) mm
+    axis_tol: np.ndarray  # (L,) rad
+    length: np.ndarray  # (L,) mm: tool length
+    pose: np.ndarray  # (L,) int
+    f0: np.ndarray  # (L,)
+    f1: np.ndarray
+    final: np.ndarray  # (L,) bool: the leg's end is a block of its own (not the CL pose's)
+    move: np.ndarray  # (L,) int: the move between cuts the leg belongs to
+
+    def height(self, leg: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """mm: how far the path is lifted above the line at fractions u of legs ``leg``: the full
+        lift in the interior, reached along a ramp of slope 1/4 from each end."""
+        size = np.linalg.norm(self.tip1[leg] - self.tip0[leg], axis=1)
+        ramp = 4.0 * self.lift[leg]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.lift[leg] * np.where(ramp > 0, np.minimum(1.0, np.minimum(u, 1.0 - u) * size / ramp), 0.0)
+
+    def tip(self, leg: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The lifted path at fractions u of legs ``leg`` (mm, table frame)."""
+        span = self.tip1[leg] - self.tip0[leg]
+        return self.tip0[leg] + u[:, None] * span + self.height(leg, u)[:, None] * self.up[leg]
+
+    def axis(self, leg: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The tool axis at fractions u of legs ``leg``."""
+        angles = self.phi0[leg] + u[:, None] * (self.phi1[leg] - self.phi0[leg])
+        turned = axis_from_angles(angles[:, 0], angles[:, 1])
+        return np.where(self.reorient[leg][:, None], turned, slerp(self.axis0[leg], self.axis1[leg], u))
+
+    def theta2(self, leg: np.ndarray, u: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """theta2 (rad) to solve the point at fractions u near: on a reorientation its own angle, else
+        the mean of the block ends' (``left``, ``right``)."""
+        along = self.phi0[leg, 1] + u * (self.phi1[leg, 1] - self.phi0[leg, 1])
+        return np.where(self.reorient[leg], -along, 0.5 * (left + right))
+
+
+@dataclass(frozen=True)
+class Split:
+    """The block ends a split of legs made (K of them): leg, fraction u along it, the state."""
+
+    leg: np.ndarray
+    u: np.ndarray
+    state: State
+    unresolved: np.ndarray  # (L,) bool per leg
+
+
+def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
+    """Split every leg until the joint interpolation between its block ends stays within the
+    leg's tolerances (and above its line where guarded), level by level, all legs at once.
+    Returns the inserted block ends and each leg's own end where it is a block of its own."""
+    n = len(legs.pose)
+    leg, u = [np.arange(n), np.arange(n)], [np.zeros(n), np.ones(n)]
+    states = [legs.start, legs.end]
+    left, right = np.arange(n), np.arange(n, 2 * n)
+    size = 2 * n
+    unresolved = np.zeros(n, bool)
+    for level in range(MAX_LEVELS + 1):
+        if left.size == 0:
+            break
+        all_leg, all_u, every = np.concatenate(leg), np.concatenate(u), State.join(states)
+        q, alpha = every.joints, every.result.alpha
+        k, m = all_leg[left], len(left)
+        f = np.tile(MEASURE, m)
+        rows = np.repeat(np.arange(m), len(MEASURE))
+        lo, hi = left[rows], right[rows]
+        fk = forward_kinematics(machine, q[lo] + f[:, None] * (q[hi] - q[lo]), tool_length=legs.length[k][rows],
+                                alpha_guess=alpha[lo] + f * (alpha[hi] - alpha[lo]))
+        tip_error = distance_to_segment(fk.tip, every.tip[lo], every.tip[hi])
+        axis_error = angle_to_arc(fk.axis, every.axis[lo], every.axis[hi])
+        kk = k[rows]
+        dip = np.where(legs.guard[kk], dip_below(fk.tip, legs.tip0[kk], legs.tip1[kk], legs.up[kk]), 0.0)
+        bad = (~fk.reachable | ~(tip_error <= MARGIN * legs.tol[kk]) | ~(axis_error <= MARGIN * legs.axis_tol[kk])
+               | (dip > DIP_SPLIT))
+        split = np.bincount(rows, bad, minlength=m) > 0
+        # A block lifted less than fully at an end (on a ramp) sags below the line near that end
+        # unless its sag is small against the lift: with the sag S (its largest deviation from
+        # the chord) pointing straight down and parabolic, the chord lifted h_l and h_r at its
+        # ends stays above the line where 4 S <= h_l + h_r.
+        sag = np.zeros(m)
+        np.maximum.at(sag, rows, tip_error)
+        h_l, h_r = legs.height(k, all_u[left]), legs.height(k, all_u[right])
+        on_ramp = legs.guard[k] & (np.minimum(h_l, h_r) < legs.lift[k])
+        split |= on_ramp & (SAG_FACTOR * 4.0 * sag > h_l + h_r)
+        split &= (all_u[right] - all_u[left]) > 1e-9
+        counts = np.bincount(k[split], minlength=n)
+        over = (level == MAX_LEVELS) | (np.bincount(all_leg, minlength=n) + counts > MAX_POINTS_PER_LEG)
+        unresolved |= over & (counts > 0)
+        split &= ~over[k]
+        left, right, k = left[split], right[split], k[split]
+        if left.size == 0:
+            break
+        mid_u = 0.5 * (all_u[left] + all_u[right])
+        mid = _solve(machine, legs.tip(k, mid_u), legs.axis(k, mid_u), legs.length[k],
+                     legs.theta2(k, mid_u, q[left, 4], q[right, 4]), cone)
+        unreachable = mid.result.status == Status.UNREACHABLE
+        unresolved[k[unreachable]] = True
+        new = np.arange(size, size + len(k))
+        size += len(k)
+        leg.append(k)
+        u.append(mid_u)
+        states.append(mid)
+        keep = ~unreachable
+        left, right = np.r_[left[keep], new[keep]], np.r_[new[keep], right[keep]]
+    ends = np.flatnonzero(legs.final)
+    inserted = State.join(states[2:]) if len(states) > 2 else legs.end.rows(np.zeros(0, int))
+    return Split(np.r_[np.concatenate(leg[2:]).astype(int) if len(leg) > 2 else np.zeros(0, int), ends],
+                 np.r_[np.concatenate(u[2:]) if len(u) > 2 else np.zeros(0), np.ones(len(ends))],
+                 State.join([inserted, legs.end.rows(ends)]), unresolved)
+
+
+@dataclass(frozen=True)
+class Moves:
+    """K moves between cuts, each with one tool (``length`` mm): from ``start`` to ``end``, its
+    blocks those of CL pose ``pose`` at fractions ``f0`` -> ``f1``; ``final``: the end is a
+    block of its own (a joint position, a retract point), not the CL pose's."""
+
+    start: State
+    end: State
+    length: np.ndarray
+    pose: np.ndarray
+    f0: np.ndarray
+    f1: np.ndarray
+    final: np.ndarray
+    line: np.ndarray  # (K,) bool: may run on its straight line (else retract, reorient, approach)
+
+    def rows(self, index: np.ndarray) -> Moves:
+        return Moves(self.start.rows(index), self.end.rows(index), self.length[index], self.pose[index],
+                     self.f0[index], self.f1[index], self.final[index], self.line[index])
+
+    @staticmethod
+    def join(moves: list[Moves]) -> Moves:
+        return Moves(State.join([m.start for m in moves]), State.join([m.end for m in moves]),
+                     *(np.concatenate([getattr(m, name) for m in moves])
+                       for name in ("length", "pose", "f0", "f1", "final", "line")))
+
+
+def _angles(state: State) -> np.ndarray:
+    """(K, 2) the rotary angles (phi1, phi2) (rad) of the joints: alpha = theta1 + phi1, theta2 = -phi2."""
+    return np.column_stack([state.result.alpha - state.joints[:, 3], -state.joints[:, 4]])
+
+
+def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return 2.0 * np.arcsin(np.clip(np.linalg.norm(u - v, axis=-1) / 2.0, 0.0, 1.0))
+
+
+def keeps_its_pair(start: State, end: State, cone: float, samples: int = 33) -> np.ndarray:
+    """(K,) bool: the spherical interpolation of the tool axis from each start to its end keeps
+    theta2 continuous from the start's value to the end's (rad): the same angle pair, no whole
+    turn more or less, and no pass through the pole cone inside the move, where theta2 would
+    whip round (ends within the cone have a theta2 of choice)."""
+    k = len(start.tip)
+    u = np.linspace(0.0, 1.0, samples)
+    axis = slerp(np.repeat(start.axis, samples, axis=0), np.repeat(end.axis, samples, axis=0),
+                 np.tile(u, k)).reshape(k, samples, 3)
+    defined = np.arctan2(np.hypot(axis[..., 0], axis[..., 1]), axis[..., 2]) > 2.0 * cone
+    plus = -np.arctan2(axis[..., 0], -axis[..., 1])  # theta2 of angle pair +1 (pair -1: turned by pi)
+    through_pole = np.any(~defined[:, 1:-1], axis=1) & defined[:, 0] & defined[:, -1]
+    # undefined samples take the last defined value before them (the first defined one at the start)
+    index = np.maximum.accumulate(np.where(defined, np.arange(samples), -1), axis=1)
+    index = np.where(index < 0, np.argmax(defined, axis=1)[:, None], index)
+    filled = np.take_along_axis(plus, index, axis=1)
+    first = filled[:, 0]
+    pair_shift = np.where(np.abs(wrap_angle(first - start.joints[:, 4])) <= np.pi / 2, 0.0, np.pi)
+    begin = start.joints[:, 4] + wrap_angle(first + pair_shift - start.joints[:, 4])
+    predicted = begin + np.sum(wrap_angle(np.diff(filled, axis=1)), axis=1)
+    ends_well = ~defined[:, -1] | (np.abs(predicted - end.joints[:, 4]) < 1e-3)
+    return ~through_pole & ends_well
+
+
+#: A tool axis this close to horizontal (its z component) cannot retract up to a level.
+MIN_RISE = 0.05
+
+
+def line_legs(moves: Moves, settings: SafeSettings) -> Legs:
+    """One leg per move: the straight line from its start to its end (tip linear, axis by
+    spherical interpolation), lifted half the rapid tolerance and guarded against dips."""
+    k = len(moves.pose)
+    up = upward_normal(moves.start.tip, moves.end.tip)
+    lift = np.where(np.any(up != 0, axis=1), 0.5 * settings.rapid_tol, 0.0)
+    return Legs(moves.start, moves.end, moves.start.tip, moves.end.tip, moves.start.axis, moves.end.axis, up, lift,
+                np.ones(k, bool), np.zeros(k, bool), _angles(moves.start), _angles(moves.end),
+                np.full(k, 0.5 * settings.rapid_tol), np.full(k, settings.rapid_axis_tol), moves.length, moves.pose,
+                moves.f0, moves.f1, moves.final, np.arange(k))
+
+
+def detour_legs(machine: Machine, moves: Moves, settings: SafeSettings) -> tuple[Legs, np.ndarray]:
+    """Up to four legs per move: retract along the start's tool axis to the safe level, turn the
+    axis there with the tip still, travel at that level, descend along the end's tool axis.
+    Returns the legs and, per move, whether a retract or approach needs a level its tool axis
+    cannot rise to (nearly horizontal)."""
+    a, b = moves.start, moves.end
+
+    def rise(state: State) -> tuple[np.ndarray, np.ndarray]:
+        need = settings.level - state.tip[:, 2]
+        steep = state.axis[:, 2] > MIN_RISE
+        return np.where((need > 0) & steep, need / np.where(steep, state.axis[:, 2], 1.0), 0.0), (need > 0) & ~steep
+
+    rise_a, flat_a = rise(a)
+    rise_b, flat_b = rise(b)
+    top_a, top_b = a.tip + rise_a[:, None] * a.axis, b.tip + rise_b[:, None] * b.axis
+    phi_a, phi_b = _angles(a), _angles(b)
+    retract, approach = rise_a > SHORT, rise_b > SHORT
+    turn = np.any(np.abs(phi_b - phi_a) > 1e-9, axis=1)
+    travel = np.linalg.norm(top_b - top_a, axis=1) > SHORT
+    lengths, cone = moves.length, settings.cone
+    # the waypoints; one with nothing after it is the end itself
+    after_retract = _solve(machine, top_a, a.axis, lengths, a.joints[:, 4], cone).where(turn | travel | approach, b)
+    after_turn = _solve(machine, top_a, axis_from_angles(phi_b[:, 0], phi_b[:, 1]), lengths, b.joints[:, 4],
+                        cone).where(travel | approach, b)
+    after_travel = _solve(machine, top_b, b.axis, lengths, b.joints[:, 4], cone).where(approach, b)
+    start_turn = after_retract.where(retract, a)
+    start_travel = after_turn.where(turn, start_turn)
+    start_approach = after_travel.where(travel, start_travel)
+    present = np.column_stack([retract, turn, travel, approach])
+    count = present.sum(axis=1)
+    order = np.cumsum(present, axis=1) - 1  # the leg's place in its move
+    pieces = []
+    for kind, (start, end, tip0, tip1) in enumerate((
+            (a, after_retract, a.tip, top_a), (start_turn, after_turn, top_a, top_a),
+            (start_travel, after_travel, top_a, top_b), (start_approach, b, top_b, b.tip))):
+        rows = np.flatnonzero(present[:, kind])
+        m = len(rows)
+        place, total = order[rows, kind], count[rows]
+        span = moves.f1[rows] - moves.f0[rows]
+        guard = kind == 2
+        up = upward_normal(tip0[rows], tip1[rows]) if guard else np.zeros((m, 3))
+        rapid = kind in (1, 2)
+        pieces.append(Legs(
+            start.rows(rows), end.rows(rows), tip0[rows], tip1[rows], start.axis[rows], end.axis[rows], up,
+            np.where(np.any(up != 0, axis=1), 0.5 * settings.rapid_tol, 0.0), np.full(m, guard),
+            np.full(m, kind == 1), phi_a[rows], phi_b[rows],
+            np.full(m, 0.5 * settings.rapid_tol if rapid else settings.tol),
+            np.full(m, settings.rapid_axis_tol if rapid else settings.axis_tol), lengths[rows], moves.pose[rows],
+            moves.f0[rows] + span * place / total, moves.f0[rows] + span * (place + 1) / total,
+            (place < total - 1) | moves.final[rows], rows))
+    legs = Legs(*(State.join([getattr(p, name) for p in pieces]) if name in ("start", "end")
+                  else np.concatenate([getattr(p, name) for p in pieces]) for name in _LEG_FIELDS))
+    return legs, flat_a | flat_b
+
+
+_LEG_FIELDS = ("start", "end", "tip0", "tip1", "axis0", "axis1", "up", "lift", "guard", "reorient", "phi0", "phi1",
+               "tol", "axis_tol", "length", "pose", "f0", "f1", "final", "move")
+
+
+@dataclass(frozen=True)
+class Between:
+    """What :func:`between_cuts` made of a part: its blocks with the moves between cuts, the
+    problems found (CL pose index, reason), and how many moves ran on their line or detoured."""
+
+    blocks: Blocks
+    problems: tuple[tuple[int, str], ...]
+    lines: int
+    detours: int
+
+
+def _state(blocks: Blocks, index: np.ndarray) -> State:
+    return State(blocks.result.rows(index), blocks.tip[index], blocks.axis[index])
+
+
+def _above(machine: Machine, state: State, lengths: np.ndarray, settings: SafeSettings, extra: np.ndarray
+           ) -> State:
+    """The state on each tool axis above ``state`` at the safe level raised by ``extra`` (mm)."""
+    rise = np.maximum(settings.level + extra - state.tip[:, 2], 0.0) / np.maximum(state.axis[:, 2], MIN_RISE)
+    return _solve(machine, state.tip + rise[:, None] * state.axis, state.axis, lengths, state.joints[:, 4],
+                  settings.cone)
+
+
+def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings, *,
+                 before: Blocks | None, end: int) -> Between:
+    """The moves between cuts of a part (see the module docstring): ``blocks`` those of poses up to
+    ``end`` - 1 of the program's ``poses`` (pose indices of the whole program), ``before`` the
+    last block of the part before (None for the first part)."""
+    n = len(poses)
+    ext = blocks if before is None else before.then(blocks)
+    skip = 0 if before is None else 1
+    lengths = poses.tool_length
+    changes = np.zeros(n + 1, bool)
+    changes[[e.index for e in poses.events if isinstance(e, ToolChange) and 0 < e.index < n]] = True
+    own = np.flatnonzero((ext.fraction == 1) & ~ext.between)
+    known = np.all(np.isfinite(ext.joints), axis=1)
+    cone = settings.cone
+    moves: list[Moves] = []
+    extra: list[Blocks] = []
+    one = np.ones(1)
+
+    def single(start: State, finish: State, pose: int, f0: float, f1: float, final: bool) -> Moves:
+        return Moves(start, finish, lengths[[pose]], np.array([pose]), f0 * one, f1 * one, np.array([final]),
+                     np.zeros(1, bool))
+
+    # the program's start: from home (or over the first pose), positioned there first
+    if before is None and own.size and ext.pose[own[0]] == 0 and known[own[0]]:
+        first = _state(ext, own[:1])
+        start = (at_joints(machine, settings.home[None], lengths[:1], cone) if settings.home is not None
+                 else _above(machine, first, lengths[:1], settings, np.zeros(1)))
+        extra.append(Blocks(start.tip, start.axis, np.zeros(1, int), np.zeros(1), start.result, np.zeros(0, int),
+                            np.ones(1, bool)))
+        moves.append(single(start, first, 0, 0.0, 1.0, False))
+    # leaving a pose for a tool change after it, or home after the program's last pose (old tool)
+    leave_to: dict[int, np.ndarray] = {}
+    for k in own[own >= skip]:
+        pose = int(ext.pose[k])
+        if not known[k] or not (changes[pose + 1] or pose == n - 1):
+            continue
+        here = _state(ext, np.array([k]))
+        if pose == n - 1:
+            target = settings.home
+            if target is None:
+                target = _above(machine, here, lengths[[pose]], settings, np.zeros(1)).joints[0]
+        else:
+            target = settings.tool_change
+            if target is None:  # high enough that the new tool's tip is at the safe level too
+                longer = max(float(lengths[pose + 1] - lengths[pose]), 0.0) * here.axis[:, 2]
+                target = _above(machine, here, lengths[[pose]], settings, longer).joints[0]
+        leave_to[pose + 1] = target
+        moves.append(single(here, at_joints(machine, target[None], lengths[[pose]], cone), pose, 1.0, 2.0, True))
+    # into every rapid's pose, and into the first pose after a tool change
+    for k in own[np.maximum(own, 1) >= max(skip, 1)]:
+        pose = int(ext.pose[k])
+        if k == 0 or not (poses.rapid[pose] or changes[pose]) or not known[k] or not known[k - 1]:
+            continue
+        if changes[pose]:
+            joints = leave_to.get(pose, ext.joints[k - 1])
+            start = at_joints(machine, joints[None], lengths[[pose]], cone)
+        else:
+            start = _state(ext, np.array([k - 1]))
+        move = single(start, _state(ext, np.array([k])), pose, 0.0, 1.0, False)
+        if not changes[pose]:
+            turn = _angle(move.start.axis, move.end.axis)
+            move = Moves(move.start, move.end, move.length, move.pose, move.f0, move.f1, move.final,
+                         (turn <= settings.max_turn) & keeps_its_pair(move.start, move.end, cone))
+        moves.append(move)
+    if not moves:
+        return Between(blocks, (), 0, 0)
+    every = Moves.join(moves)
+    problems: list[tuple[int, str]] = []
+    straight = np.flatnonzero(every.line)
+    lines = line_legs(every.rows(straight), settings)
+    done = split_legs(machine, lines, cone)
+    failed = np.zeros(len(straight), bool)
+    np.logical_or.at(failed, lines.move[done.leg], done.state.result.status != Status.OK)
+    failed |= done.unresolved
+    keep = ~failed[lines.move[done.leg]]
+    pieces = [(lines, done, keep)]
+    detour = np.r_[np.flatnonzero(~every.line), straight[failed]]
+    if detour.size:
+        legs, flat = detour_legs(machine, every.rows(detour), settings)
+        split = split_legs(machine, legs, cone)
+        pieces.append((legs, split, np.ones(len(split.leg), bool)))
+        for m in np.flatnonzero(flat):
+            problems.append((int(every.pose[detour[m]]), f"the move between cuts cannot reach the safe level "
+                                                         f"(z {settings.level:.3f} mm): the tool axis is nearly "
+                                                         f"horizontal"))
+        for m in np.unique(legs.move[split.unresolved]):
+            problems.append((int(every.pose[detour[m]]), f"the move between cuts cannot be kept within "
+                                                         f"{settings.rapid_tol:g} mm of its path"))
+    for legs, split, mask in pieces:
+        leg, u = split.leg[mask], split.u[mask]
+        extra.append(Blocks(split.state.tip[mask], split.state.axis[mask], legs.pose[leg],
+                            legs.f0[leg] + u * (legs.f1[leg] - legs.f0[leg]), split.state.result.rows(mask),
+                            np.zeros(0, int), np.ones(len(leg), bool)))
+    merged = blocks
+    for more in extra:
+        merged = merged.then(more)
+    order = np.lexsort((merged.fraction, merged.pose))
+    return Between(merged.rows(order), tuple(problems), int(len(straight) - failed.sum()), int(detour.size))
