@@ -630,7 +630,7 @@ class _Batch:
         length = np.linalg.norm(tip[left + 1] - tip[left], axis=1)
         rotary_only = length < TIP_EPS
         rotary = np.linalg.norm(dq[:, 3:], axis=1)
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):  # a rapid's cap (1e9 mm/s) over a tiny length
             tip_cap = np.where(rotary_only, np.inf, feed * ds / np.maximum(length, 1e-300))
             rot_cap = np.where(rotary_only & (rotary > 0), angular_feed * ds / np.maximum(rotary, 1e-300), np.inf)
             dur_cap = ds / min_duration if min_duration > 0 else np.full(len(ds), np.inf)

@@ -121,7 +121,10 @@ class _Points:
     def chosen(self, checked: Checked, offset: np.ndarray) -> _Points:
         """The block ends of a full check at ``offset`` (every CL pose has one) and the branch
         stage's choices there; ``self`` must hold every CL pose."""
-        blocks, result = checked.blocks, checked.blocks.result
+        # the moves between cuts are not the program's points: they follow the part (or the
+        # machine's fixed positions) by the safe-motion stage's rules, checked in full each time
+        blocks = checked.blocks.rows(np.flatnonzero(~checked.blocks.between))
+        result = blocks.result
         pose = blocks.pose
         first = np.searchsorted(self.pose, pose)  # a point of the same CL pose: its length and run
         in_cone = checked.path.in_cone[pose]
@@ -315,6 +318,11 @@ def _verdict(machine: Machine, poses: MachinePoses, shifted: MachinePoses, check
     joints = np.concatenate([blocks.joints, along.joints])
     room = np.concatenate([headroom(machine, blocks.joints, blocks.result.margins),
                            headroom(machine, along.joints, along.margins)])
+    # The moves between cuts must run (their violations count), but their headroom is not the
+    # placement's aim: home and the tool-change position sit where the machine file puts them,
+    # whatever the offset.
+    between = np.r_[blocks.between, blocks.between[along.block]]
+    room[between] = np.inf
     value, which = smallest(room)
     # Motion samples between blocks m - 1 and m belong to the CL pose of block m.
     pose = np.concatenate([blocks.pose, blocks.pose[along.block]])

@@ -32,7 +32,7 @@ to the pose they leave, with fractions in (1, 2]. Units: mm and rad, table frame
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -145,7 +145,15 @@ def _solve(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndar
         empty = solve_with_theta2(machine, np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros(1), np.zeros(1),
                                   cone)[0]
         return State(empty.rows(np.zeros(0, int)), np.zeros((0, 3)), np.zeros((0, 3)))
+    known = np.all(np.isfinite(tip), axis=1) & np.all(np.isfinite(axis), axis=1) & np.isfinite(theta2)
+    if not known.all():  # a pose of nowhere (a position out of reach): unreachable, not an error
+        tip, axis = np.where(known[:, None], tip, 0.0), np.where(known[:, None], axis, [0.0, 0.0, 1.0])
+        theta2 = np.where(known, theta2, 0.0)
     result, realised = solve_with_theta2(machine, tip, axis, lengths, theta2, cone)
+    if not known.all():
+        nowhere = replace(result, joints=np.full_like(result.joints, np.nan),
+                          status=np.full_like(result.status, Status.UNREACHABLE))
+        result = nowhere.take(~known, result)
     return State(result, tip, realised)
 
 
@@ -153,8 +161,9 @@ def at_joints(machine: Machine, joints: np.ndarray, lengths: np.ndarray, cone: f
     """The state at given joints (K, 5) (mm, rad) with tools of ``lengths`` (K,) mm: tip and axis
     by the forward kinematics, the IK result (margins, status) with exactly these joints."""
     fk = forward_kinematics(machine, joints, tool_length=lengths)
-    state = _solve(machine, np.nan_to_num(fk.tip), fk.axis, lengths, joints[:, 4], cone)
-    return State(state.result.with_joints(joints.copy()), fk.tip, fk.axis)
+    tip = np.where(fk.reachable[:, None], fk.tip, np.nan)
+    state = _solve(machine, tip, fk.axis, lengths, joints[:, 4], cone)
+    return State(state.result.with_joints(np.where(fk.reachable[:, None], joints, np.nan)), tip, fk.axis)
 
 
 @dataclass(frozen=True)
@@ -510,6 +519,12 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
         return Between(blocks, (), 0, 0)
     every = Moves.join(moves)
     problems: list[tuple[int, str]] = []
+    known_ends = (np.all(np.isfinite(every.start.joints), axis=1) & np.all(np.isfinite(every.end.joints), axis=1)
+                  & np.all(np.isfinite(every.start.tip), axis=1) & np.all(np.isfinite(every.end.tip), axis=1))
+    for m in np.flatnonzero(~known_ends):
+        problems.append((int(every.pose[m]), "the move between cuts starts or ends out of reach (the machine file's "
+                                             "positions, or a retract above the safe level)"))
+    every = every.rows(np.flatnonzero(known_ends))
     straight = np.flatnonzero(every.line)
     lines = line_legs(every.rows(straight), settings)
     done = split_legs(machine, lines, cone)
@@ -535,7 +550,11 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
         extra.append(Blocks(split.state.tip[mask], split.state.axis[mask], legs.pose[leg],
                             legs.f0[leg] + u * (legs.f1[leg] - legs.f0[leg]), split.state.result.rows(mask),
                             np.zeros(0, int), np.ones(len(leg), bool)))
-    merged = blocks
+    # the block that ends a move into a CL pose is the last of that move (after a tool change, or
+    # at the program's start, a feed pose's own block is the approach's last)
+    into = np.zeros(len(blocks.pose), bool)
+    into[np.searchsorted(blocks.pose, every.pose[every.f1 == 1.0])] = True
+    merged = replace(blocks, between=blocks.between | (into & (blocks.fraction == 1)))
     for more in extra:
         merged = merged.then(more)
     order = np.lexsort((merged.fraction, merged.pose))

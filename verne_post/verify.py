@@ -851,11 +851,15 @@ def _against(program: GcodeProgram, machine: Machine, reference: Reference, moti
     curves = motion.curves
     owner, a, b = pieces.pairs(np.arange(m_blocks))
     segment = a != b  # a piece of one pose has no motion of its own
-    cl_rapid = np.bincount(owner, reference.rapid[b] & segment, minlength=m_blocks) > 0
-    cl_feed = np.bincount(owner, ~reference.rapid[b] & segment, minlength=m_blocks) > 0
+    # a CL move across a tool change cannot be cut as programmed: the tool that reaches its end
+    # is not the one that left its start (the program moves between cuts there)
+    tool_at = np.where(matched >= 0, program.tool[np.maximum(matched, 0)], -2)
+    retooled = (tool_at[a] != tool_at[b]) & (tool_at[a] != -2) & (tool_at[b] != -2)
+    cl_rapid = np.bincount(owner, (reference.rapid[b] | retooled) & segment, minlength=m_blocks) > 0
+    cl_feed = np.bincount(owner, ~reference.rapid[b] & ~retooled & segment, minlength=m_blocks) > 0
     cl_feed[0] = False  # the first block comes from wherever the machine stands
     for m in np.flatnonzero(program.rapid & cl_feed):
-        findings.append(Finding(int(lines[m]), "motion", "G0 (rapid) where the CL path feeds",
+        findings.append(Finding(int(lines[m]), "motion", "rapid where the CL path feeds",
                                 cl_line=int(cl_lines[pieces.last[m]])))
     follows = ~program.rapid[curves.moves] & ~cl_rapid[curves.moves]
     inner_follows = np.repeat(follows, curves.n - 1)
@@ -956,53 +960,25 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: _Motion, pieces
             float(np.max(np.where(judged, least_dip, 0.0), initial=0.0)))
 
 
-#: rad: a run of marked rapid blocks whose tip path turns more than this is two rapids there (a
-#: retract, then a travel).
-RAPID_CORNER = np.radians(45.0)
-#: mm: a block whose tip moves less than this has no direction (a turn with the tip still).
-RAPID_STILL = 0.01
-
-
 def _run_dips(program: GcodeProgram, motion: _Motion, rapid_tol: float, findings: list[Finding]) -> float | None:
-    """Without the CL path: each rapid, from the block end before it to its last, judged by its
-    largest dip below the lower of those two ends (mm; a finding where it exceeds ``rapid_tol``).
-    A rapid is a G0 block, or a run of G1 blocks marked ``(RAPID)`` up to a corner of its tip
-    path (:data:`RAPID_CORNER`). Returns the largest dip, None without rapid moves."""
+    """Without the CL path: each rapid block (G0, or G1 marked ``(RAPID)``) judged by its largest
+    dip below the lower of its two ends (mm, sampling bound included; a finding where it exceeds
+    ``rapid_tol``). Returns the largest dip, None without rapid moves."""
     curves = motion.curves
     rapid_moves = np.flatnonzero(program.rapid[curves.moves])
     if rapid_moves.size == 0:
         return None
-    chord = np.diff(motion.ends.tip, axis=0, prepend=motion.ends.tip[:1])
-    size = np.linalg.norm(chord, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos = np.sum(chord[1:] * chord[:-1], axis=1) / (size[1:] * size[:-1])
-    # a block whose tip hardly moves (a turn on the spot) has no direction: no corner at it
-    still = size < RAPID_STILL
-    corner = np.r_[False, (np.nan_to_num(cos, nan=1.0) < np.cos(RAPID_CORNER)) & ~still[1:] & ~still[:-1]]
-    alone = np.isnan(program.duration)  # a G0 block is a rapid of its own
-    joined = program.rapid[1:] & program.rapid[:-1] & ~alone[1:] & ~alone[:-1] & ~corner[1:]
-    run_of_block = np.cumsum(np.r_[True, ~joined]) - 1
-    run = run_of_block[curves.moves[rapid_moves]]
-    runs, run = np.unique(run, return_inverse=True)
-    z = curves.tip[:, 2]
-    start, stop = curves.start[rapid_moves], curves.start[rapid_moves] + curves.n[rapid_moves]
-    lowest = np.full(len(runs), np.inf)
-    count = curves.n[rapid_moves] + 1
-    for_points = np.repeat(run, count)
-    points = np.repeat(start, count) + _ranks(count)
-    np.fmin.at(lowest, for_points, z[points] - np.repeat(motion.bound_tip[rapid_moves], curves.n[rapid_moves] + 1))
-    first = np.full(len(runs), len(z))
-    np.minimum.at(first, run, start)
-    final = np.zeros(len(runs), int)
-    np.maximum.at(final, run, stop)
-    dip = np.maximum(np.fmin(z[first], z[final]) - lowest, 0.0)
-    first_block = np.full(len(runs), len(program.line))
-    np.minimum.at(first_block, run, curves.moves[rapid_moves])
+    start, count = curves.start[rapid_moves], curves.n[rapid_moves] + 1
+    z = curves.tip[np.repeat(start, count) + _ranks(count), 2]
+    lowest = np.minimum.reduceat(np.nan_to_num(z, nan=np.inf), np.cumsum(count) - count)
+    ends = np.fmin(curves.tip[start, 2], curves.tip[start + count - 1, 2])
+    dip = np.maximum(ends - lowest + motion.bound_tip[rapid_moves], 0.0)
+    dip = np.where(np.isfinite(dip), dip, 0.0)  # a move out of reach is a finding of its own
     for k in np.flatnonzero(dip > rapid_tol):
-        findings.append(Finding(int(program.line[first_block[k]]), "rapid", f"rapid dips {dip[k]:.4f} mm below "
-                                f"the lower of its ends (max {rapid_tol:g} mm)", value=float(dip[k]),
-                                limit=rapid_tol))
-    return float(np.nan_to_num(dip, nan=0.0).max(initial=0.0))
+        findings.append(Finding(int(program.line[curves.moves[rapid_moves[k]]]), "rapid", f"rapid dips "
+                                f"{dip[k]:.4f} mm below the lower of its ends (max {rapid_tol:g} mm)",
+                                value=float(dip[k]), limit=rapid_tol))
+    return float(dip.max(initial=0.0))
 
 
 def _unreached(reference: Reference, matched: np.ndarray, ends: _Poses, lines: np.ndarray, tol: float,

@@ -1,0 +1,301 @@
+"""Moves between cuts: every rapid, retract, reorientation, tool change and home move of a posted
+program, judged as the tool tip moves relative to the part through the forward kinematics.
+
+The judge here is independent of verne_post.safe_motion and of verne_post.verify: the program is
+read back from its text, each block's joint-space line sampled and taken through the forward
+kinematics (no inverse kinematics), and every sample of a move between cuts must lie within
+1 mm of the CL path between the CL points the move joins (and never below that path), on a
+retract or approach ray along a CL point's tool axis, or above every feed point of the program.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+import verne_post as vp
+from verne_post.cl import read_toolpath
+from verne_post.gcode_reader import read_gcode
+from verne_post.pipeline import PostOptions, post
+from verne_post.safe_motion import dip_below, upward_normal
+from verne_post.verify import verify_program
+
+DATA = Path(__file__).resolve().parent / "data"
+SAMPLES = DATA / "cl-samples"
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+SAMPLES_PER_BLOCK = 16
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = b - a
+    t = np.clip(np.sum((p - a) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * d), axis=1)
+
+
+def _below_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """How far p lies below segment a-b: the height of the segment straight above or below p
+    (where p's horizontal projection falls on the segment's), minus p's z; else below the lower end."""
+    d = b - a
+    horizontal2 = d[:, 0] ** 2 + d[:, 1] ** 2
+    t = np.clip(np.sum((p - a)[:, :2] * d[:, :2], axis=1) / np.maximum(horizontal2, 1e-300), 0.0, 1.0)
+    over = (a + t[:, None] * d)[:, 2] - p[:, 2]
+    flat_distance = np.linalg.norm((p - (a + t[:, None] * d))[:, :2], axis=1)
+    # vertical segments, or p beside the segment: only its lower end counts
+    under_end = np.minimum(a[:, 2], b[:, 2]) - p[:, 2]
+    vertical = horizontal2 < 1e-12
+    return np.where(vertical | (flat_distance > 1.0), under_end, np.maximum(over, under_end))
+
+
+def _ray_distance(p: np.ndarray, origin: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    s = np.maximum(np.sum((p - origin) * axis, axis=1), 0.0)
+    return np.linalg.norm(p - origin - s[:, None] * axis, axis=1)
+
+
+def judge_moves_between_cuts(machine: vp.Machine, text: str, cl_tip: np.ndarray, cl_axis: np.ndarray,
+                             cl_rapid: np.ndarray, tol: float = 1.0) -> dict[str, float]:
+    """Every sample of every rapid block of ``text`` against the CL path (table frame, mm); returns
+    the worst distance from where a move between cuts may be, the worst dip below the CL path of
+    the samples judged by it, and the number of rapid blocks judged."""
+    program = read_gcode(text)
+    q, lengths = program.joints, program.tool_length
+    top = float(cl_tip[~cl_rapid, 2].max())
+    ends = vp.forward_kinematics(machine, q, tool_length=lengths)
+    # the CL point each block end reaches (tip within 2 um, axis within 0.01 rad), -1 for none
+    tree = cKDTree(cl_tip)
+    reached = np.full(len(q), -1)
+    for k, candidates in enumerate(tree.query_ball_point(np.nan_to_num(ends.tip, nan=1e9), 2e-3)):
+        good = [c for c in candidates if np.dot(cl_axis[c], ends.axis[k]) > np.cos(0.01)]
+        if good:
+            reached[k] = min(good, key=lambda c: abs(c - (reached[:k].max(initial=0))))
+    last_reached = np.maximum.accumulate(np.where(reached >= 0, reached, 0))
+    next_reached = np.minimum.accumulate(np.where(reached >= 0, reached, len(cl_tip) - 1)[::-1])[::-1]
+    worst, worst_dip, judged = 0.0, 0.0, 0
+    f = np.arange(SAMPLES_PER_BLOCK + 1) / SAMPLES_PER_BLOCK
+    for m in np.flatnonzero(program.rapid)[1:]:  # block 0 comes from wherever the machine stands
+        joints = q[m - 1] + f[:, None] * (q[m] - q[m - 1])
+        fk = vp.forward_kinematics(machine, joints, tool_length=lengths[m])
+        assert fk.reachable.all(), f"G-code line {program.line[m]} passes out of reach"
+        i, j = int(last_reached[m - 1]), int(next_reached[m])
+        poses = np.arange(min(i, j), max(i, j) + 1)
+        p = np.repeat(fk.tip, len(poses), axis=0)
+        a = np.tile(cl_tip[np.maximum(poses - 1, poses[0])], (len(f), 1))
+        b = np.tile(cl_tip[poses], (len(f), 1))
+        near_path = (_segment_distance(p, a, b) <= tol).reshape(len(f), -1)
+        dip = _below_segment(p, a, b).reshape(len(f), -1)
+        on_path = np.any(near_path & (dip <= 1e-3), axis=1)
+        axes = np.tile(cl_axis[poses], (len(f), 1))
+        on_ray = np.any((_ray_distance(p, b, axes) <= tol).reshape(len(f), -1), axis=1)
+        above = fk.tip[:, 2] >= top
+        ok = on_path | on_ray | above
+        assert ok.all(), (f"G-code line {program.line[m]}: tip {fk.tip[~ok][0]} is off the CL path between CL "
+                          f"points {i} and {j}, on no retract ray and below the highest feed point {top:.3f}")
+        judged_by_path = ~on_ray & ~above
+        if judged_by_path.any():
+            worst_dip = max(worst_dip, float(np.max(np.min(np.where(near_path, dip, np.inf), axis=1)[judged_by_path])))
+        worst = max(worst, float(np.max(np.where(above | on_ray, 0.0, np.min(np.where(
+            near_path, _segment_distance(p, a, b).reshape(len(f), -1), np.inf), axis=1)))))
+        judged += 1
+    return {"worst": worst, "dip": max(worst_dip, 0.0), "judged": judged}
+
+
+def _post(tmp_path: Path, machine: vp.Machine, cl: Path, **options: object) -> tuple[str, np.ndarray]:
+    out = tmp_path / (cl.stem + ".nc")
+    posted = post(cl, machine, PostOptions(workers=1, **options), out)  # type: ignore[arg-type]
+    assert not posted.violations, posted.violations[:3]
+    assert posted.verification is not None and posted.verification.ok, posted.verification.findings[:3]
+    text = out.read_text()
+    offset = [float(v) for v in re.search(r"WORK OFFSET (\S+) (\S+) (\S+) MM", text).groups()]
+    return text, np.array(offset)
+
+
+@pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md"),
+                                EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
+def test_every_move_between_cuts_of_the_real_samples_stays_on_the_cam_path_or_above_it(tmp_path, machine, cl):
+    text, offset = _post(tmp_path, machine, cl, work_offset="auto", tool_length=100.0)
+    path = read_toolpath(cl)
+    judged = judge_moves_between_cuts(machine, text, path.tip + offset, path.axis, path.rapid)
+    assert judged["judged"] > 0
+    assert judged["dip"] <= 1e-3  # mm: never below the CAM's path
+    again = verify_program(text, machine, against=path, rapid_tol=0.5)
+    assert not [f for f in again.findings if f.kind == "rapid"]
+
+
+CLEARANCE_CL = """PARTNO/CLEARANCE
+UNITS/MM
+LOADTL/1,LENGTH,80.0
+FEDRAT/MMPM,500.0
+GOTO/-150.0,-60.0,0.0,0.0,0.0,1.0
+RAPID
+GOTO/-150.0,-60.0,60.0,0.0,0.0,1.0
+RAPID
+GOTO/150.0,60.0,60.0,0.0,0.0,1.0
+RAPID
+GOTO/150.0,60.0,5.0,0.0,0.0,1.0
+GOTO/150.0,60.0,0.0,0.0,0.0,1.0
+GOTO/100.0,60.0,0.0,0.0,0.0,1.0
+"""
+
+
+def test_a_rapid_between_two_clearance_points_at_one_height_dips_by_nothing(tmp_path, machine):
+    cl = tmp_path / "clearance.cls"
+    cl.write_text(CLEARANCE_CL)
+    offset = np.array([0.0, 0.0, 250.0])
+    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
+    path = read_toolpath(cl)
+    tip = path.tip + offset
+    # the case is a real one: the joint-space line between the two clearance points sags below them
+    ends = vp.inverse_kinematics(machine, tip[1:3], path.axis[1:3], tool_length=80.0).joints
+    f = np.linspace(0.0, 1.0, 101)
+    sag = vp.forward_kinematics(machine, ends[0] + f[:, None] * (ends[1] - ends[0]), tool_length=80.0).tip
+    assert tip[1, 2] - sag[:, 2].min() > 1.0
+    judged = judge_moves_between_cuts(machine, text, tip, path.axis, path.rapid)
+    assert judged["dip"] < 0.5e-3  # 0 um when rounded to um
+    verification = verify_program(text, machine, against=path, work_offset=tuple(offset))
+    assert verification.ok and verification.rapid_dip is not None and verification.rapid_dip < 0.5e-3
+
+
+TURN_CL = """PARTNO/TURN
+UNITS/MM
+LOADTL/1,LENGTH,80.0
+FEDRAT/MMPM,500.0
+GOTO/-40.0,0.0,0.0,-0.7071067811865476,0.0,0.7071067811865476
+GOTO/-30.0,0.0,0.0,-0.7071067811865476,0.0,0.7071067811865476
+RAPID
+GOTO/40.0,0.0,2.0,0.7071067811865476,0.0,0.7071067811865476
+GOTO/40.0,0.0,0.0,0.7071067811865476,0.0,0.7071067811865476
+GOTO/30.0,0.0,0.0,0.7071067811865476,0.0,0.7071067811865476
+"""
+
+
+def test_a_rapid_that_turns_the_axis_by_90_degrees_retracts_reorients_above_and_approaches(tmp_path, machine):
+    cl = tmp_path / "turn.cls"
+    cl.write_text(TURN_CL)
+    offset = np.array([0.0, 0.0, 250.0])
+    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
+    path = read_toolpath(cl)
+    tip, axis = path.tip + offset, path.axis
+    program = read_gcode(text)
+    fk = vp.forward_kinematics(machine, program.joints, tool_length=program.tool_length)
+    top = tip[~path.rapid, 2].max()
+    level = top + machine.safe.clearance
+    a, b = tip[1], tip[2]  # the rapid's CL ends
+    between = np.flatnonzero(program.rapid)
+    between = between[(between > np.flatnonzero(np.all(np.abs(fk.tip - a) < 1e-3, axis=1))[0])
+                      & (between <= np.flatnonzero(np.all(np.abs(fk.tip - b) < 1e-3, axis=1))[0])]
+    on_a = _ray_distance(fk.tip[between], np.tile(a, (len(between), 1)), np.tile(axis[1], (len(between), 1)))
+    on_b = _ray_distance(fk.tip[between], np.tile(b, (len(between), 1)), np.tile(axis[2], (len(between), 1)))
+    high = fk.tip[between, 2] >= level - 1e-3
+    assert np.all((on_a < 5e-3) | (on_b < 5e-3) | high)
+    # retract up A's axis to the safe level, turn there with the tip still, come down B's axis
+    turning = high & (np.degrees(np.arccos(np.clip(fk.axis[between] @ axis[1], -1, 1))) > 1.0) & \
+        (np.degrees(np.arccos(np.clip(fk.axis[between] @ axis[2], -1, 1))) > 1.0)
+    assert turning.sum() >= 3
+    still = fk.tip[between][turning]
+    assert np.ptp(still, axis=0).max() < 1e-3
+    assert np.any((on_a < 5e-3) & high) and np.any((on_b < 5e-3) & high)
+    judged = judge_moves_between_cuts(machine, text, tip, axis, path.rapid)
+    assert judged["judged"] >= 3
+
+
+TOOLS_CL = """PARTNO/TOOLS
+UNITS/MM
+LOADTL/1,LENGTH,60.0
+FEDRAT/MMPM,500.0
+RAPID
+GOTO/0.0,0.0,20.0,0.0,0.0,1.0
+GOTO/0.0,0.0,0.0,0.0,0.0,1.0
+GOTO/30.0,0.0,0.0,0.0,0.0,1.0
+LOADTL/2,LENGTH,100.0
+RAPID
+GOTO/30.0,30.0,20.0,0.0,0.0,1.0
+GOTO/30.0,30.0,0.0,0.0,0.0,1.0
+GOTO/0.0,30.0,0.0,0.0,0.0,1.0
+"""
+
+
+def _blocks(text: str) -> list[tuple[int, str]]:
+    return [(k, line) for k, line in enumerate(text.splitlines()) if re.match(r"G[01] X", line)]
+
+
+def _joints_of(line: str) -> np.ndarray:
+    return np.array([float(re.search(rf"{letter}(-?[0-9.]+)", line).group(1)) for letter in "XYZAC"])
+
+
+def test_tool_changes_happen_at_the_tool_change_position_and_the_program_ends_at_home(tmp_path, machine):
+    positions = {"home": {"rho1": 120.0, "rho2": 70.0, "rho3": 66.0, "theta1": 0.0, "theta2": 0.0},
+                 "tool_change": {"rho1": 90.0, "rho2": 40.0, "rho3": 41.0, "theta1": 5.0, "theta2": 30.0}}
+    custom = vp.Machine.model_validate({**machine.model_dump(), "positions": positions})
+    cl = tmp_path / "tools.cls"
+    cl.write_text(TOOLS_CL)
+    text, _ = _post(tmp_path, custom, cl, work_offset=(0.0, 0.0, 250.0))
+    lines = text.splitlines()
+    blocks = _blocks(text)
+    home = np.array([positions["home"][k] for k in ("rho1", "rho2", "rho3", "theta1", "theta2")])
+    change = np.array([positions["tool_change"][k] for k in ("rho1", "rho2", "rho3", "theta1", "theta2")])
+    assert blocks[0][1].startswith("G0") and np.array_equal(_joints_of(blocks[0][1]), home)
+    assert np.array_equal(_joints_of(blocks[-1][1]), home)
+    m6 = next(k for k, line in enumerate(lines) if line.startswith("T2 M6"))
+    before = [line for k, line in blocks if k < m6]
+    assert np.array_equal(_joints_of(before[-1]), change)
+    judged = judge_moves_between_cuts(custom, text, read_toolpath(cl).tip + np.array([0.0, 0.0, 250.0]),
+                                      read_toolpath(cl).axis, read_toolpath(cl).rapid)
+    assert judged["judged"] > 0
+
+
+DIPPING_G0 = """%
+(TOLERANCE 0.005 MM 0.05 DEG)
+G21 G90 G17 G40 G49 G94
+(TOOL 1 LENGTH 80.0000 DELTA 575.8000)
+T1 M6
+G0 X{0} Y{1} Z{2} A{3} C{4}
+G0 X{5} Y{6} Z{7} A{8} C{9}
+M30
+%
+"""
+
+
+def test_verify_catches_a_hand_written_g0_that_dips_at_its_line(tmp_path, machine):
+    tip = np.array([[-150.0, -60.0, 310.0], [150.0, 60.0, 310.0]])
+    axis = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    joints = vp.inverse_kinematics(machine, tip, axis, tool_length=80.0).joints
+    words = [*joints[0, :3], *np.degrees(joints[0, 3:]), *joints[1, :3], *np.degrees(joints[1, 3:])]
+    text = DIPPING_G0.format(*(f"{w:.4f}" for w in words))
+    found = verify_program(text, machine, rapid_tol=0.5)
+    rapid = [f for f in found.findings if f.kind == "rapid"]
+    assert [f.line for f in rapid] == [7]
+    assert found.rapid_dip is not None and found.rapid_dip > 1.0
+    cl = tmp_path / "two.cls"
+    cl.write_text("UNITS/MM\nLOADTL/1,LENGTH,80.0\nRAPID\nGOTO/-150.0,-60.0,310.0,0.0,0.0,1.0\n"
+                  "RAPID\nGOTO/150.0,60.0,310.0,0.0,0.0,1.0\n")
+    against = verify_program(text, machine, against=read_toolpath(cl), work_offset=(0.0, 0.0, 0.0))
+    rapid = [f for f in against.findings if f.kind == "rapid"]
+    assert [(f.line, f.cl_line) for f in rapid] == [(7, 6)]
+    assert against.rapid_dip is not None and against.rapid_dip > 1.0
+
+
+def test_dip_below_a_segment_agrees_with_a_brute_force_scan():
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-100, 100, (2000, 3))
+    b = a + rng.uniform(-50, 50, (2000, 3))
+    b[:200, :2] = a[:200, :2]  # vertical segments
+    p = a + rng.uniform(0, 1, (2000, 1)) * (b - a) + rng.normal(0, 2, (2000, 3))
+    found = dip_below(p, a, b, upward_normal(a, b))
+    # brute force: the largest downward distance of p below the line, measured perpendicular to the
+    # line within its vertical plane, by scanning directions in that plane
+    d = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    expected = np.empty(len(p))
+    for k in range(len(p)):
+        z = np.array([0.0, 0.0, 1.0])
+        n = z - d[k, 2] * d[k]
+        under_end = min(a[k, 2], b[k, 2]) - p[k, 2]
+        if np.linalg.norm(n) < 1e-6:
+            expected[k] = max(under_end, 0.0)
+            continue
+        n /= np.linalg.norm(n)
+        heights = [(p[k] - a[k]) @ (np.cos(t) * n + np.sin(t) * np.cross(d[k], n)) for t in (0.0,)]
+        expected[k] = max(-heights[0], under_end, 0.0)
+    assert np.allclose(found, expected, atol=1e-9)
