@@ -642,8 +642,8 @@ def batch_command(inputs: tuple[str, ...], output_dir: str, jobs: int | None, sc
     options = BatchOptions(_options_from(no_timing, auto_offset, **choices), output_format or "gcode", period,
                            not no_verify, decimals=decimals)
     files = expand_inputs(inputs)
-    if summary_path:
-        check_writable(summary_path)  # now, not after the batch
+    if summary_path and Path(summary_path).resolve().parent != Path(output_dir).resolve():
+        check_writable(summary_path)  # now, not after the batch (OUTDIR itself is made by the batch)
     show = not quiet and sys.stderr.isatty()
     stream = sys.stderr if show else io.StringIO()
     with open_executor(scheduler, jobs, stages=show) as (executor, width, stages), click.progressbar(
