@@ -387,6 +387,9 @@ _reader_options = [
     click.option("--frame", type=click.Choice(["local", "world", "apply"]), default=None,
                  help="What MSYS/CSYS mean (default: the CAM dialect's): data in that frame (local), already "
                       "in one frame (world), or to be mapped by it (apply)."),
+    click.option("--feed", type=Number(1e-6, 1e7, " mm/min"), default=None, metavar="MM/MIN",
+                 help="Feed of the feed moves before the CL file's first FEDRAT, in mm/min whatever the file's "
+                      "units (for CAM output that gives no feed); recorded in the G-code header."),
 ]
 
 def _reader_option_group(function: Callable[..., Any]) -> Callable[..., Any]:
@@ -395,11 +398,13 @@ def _reader_option_group(function: Callable[..., Any]) -> Callable[..., Any]:
     return function
 
 
-def _read_cl(cl_file: str, units: str | None, arc_tol: float, arc_direction: str | None, frame: str | None) -> Any:
+def _read_cl(cl_file: str, units: str | None, arc_tol: float, arc_direction: str | None, frame: str | None,
+             feed: float | None) -> Any:
     """The CL file as the reader options say."""
     from .cl import read_toolpath
 
-    return read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame)
+    return read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame,
+                         feed=feed)
 
 
 def _decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) -> Callable[..., Any]:

@@ -69,6 +69,7 @@ class PostOptions:
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
     arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
+    feed: float | None = None  # mm/min: the feed of feed moves before the CL file's first FEDRAT
     plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
     planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
     optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
@@ -572,7 +573,7 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
                    ) -> tuple[MachinePoses, PostOptions, Placement | None]:
     """Stages 1 and 2: the CL file read, the work offset placed, the poses in the table frame."""
     toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
-                             arc_direction=options.arc_direction, frame=options.frame)
+                             arc_direction=options.arc_direction, frame=options.frame, feed=options.feed)
     clock.lap("parse")
     placement = None
     if options.work_offset == "auto":
@@ -801,6 +802,7 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         f"MACHINE {machine.source} ({machine.name})",
         f"SOURCE {Path(poses.source).name}",
         f"CL DIALECT {poses.dialect}",
+        *(f"CL READING {note}" for note in poses.notes),
         "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (

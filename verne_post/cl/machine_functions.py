@@ -66,6 +66,8 @@ def fedrat(st: ReaderState, rec: Record) -> None:
         raise st.fail(f"FEDRAT: unknown feed unit '{unit[:40]}' (expected MMPM, IPM, FPM, PERMIN, MMPR, IPR, FPR, "
                       "PERREV or INVERS)", rec.line)
     value = nums[0]
+    if st.first_fedrat is None:
+        st.first_fedrat = len(st.lines)
     st.fpr = None
     st.inverse = False
     if unit == "INVERS":

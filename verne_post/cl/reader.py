@@ -45,12 +45,13 @@ import numpy as np
 
 from verne_post.errors import InputError
 from verne_post.tables import read_table
-from verne_post.toolpath import Toolpath
+from verne_post.toolpath import MIN_FEED, Toolpath
 
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes
 from .dialects import ArcDirection, FrameMode, detect_dialect
 from .lexer import GotoRun, Record, iter_lines, record_runs
+from .machine_functions import MAX_FEED
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -355,13 +356,16 @@ def read_cl(
     chordal_tolerance: float = 0.001,
     arc_direction: ArcDirection | None = None,
     frame: FrameMode | None = None,
+    feed: float | None = None,
 ) -> Toolpath:
     """Read an APT/CLSF cutter-location file (mm, mm/min, part frame; see the module docstring).
 
     ``units`` overrides the source units; ``chordal_tolerance`` (mm) bounds the deviation of
     arcs, helices and splines expanded into poses; ``arc_direction`` (``"cw"``/``"ccw"`` about
     the CIRCLE axis) and ``frame`` (``"local"``/``"world"``/``"apply"``) override the dialect's
-    conventions. Raises :class:`~verne_post.errors.InputError` naming the file and line.
+    conventions; ``feed`` (mm/min, whatever the file's units) is the feed of the feed moves
+    before the first FEDRAT, for CAM output that gives none (recorded in ``notes``). Raises
+    :class:`~verne_post.errors.InputError` naming the file and line.
     """
     src = os.fspath(path)
     override = _check_units_arg(units)
@@ -369,6 +373,8 @@ def read_cl(
         raise InputError(f"arc direction must be 'cw' or 'ccw', got {arc_direction!r}")
     if frame not in (None, "local", "world", "apply"):
         raise InputError(f"frame must be 'local', 'world' or 'apply', got {frame!r}")
+    if feed is not None and not (isinstance(feed, (int, float)) and MIN_FEED <= feed <= MAX_FEED):
+        raise InputError(f"--feed must be from {MIN_FEED:g} to {MAX_FEED:g} mm/min, got {feed!r}")
     if not (isinstance(chordal_tolerance, (int, float)) and 1e-6 <= chordal_tolerance <= 10.0):
         raise InputError(f"chordal tolerance must be from 1e-6 to 10 mm, got {chordal_tolerance!r}")
     text = _read_text(path, src)
@@ -377,7 +383,8 @@ def read_cl(
     def attempt(text: str, direction: ArcDirection) -> ReaderState:
         warnings = Warnings(src)
         file_units = _decide_units(text, override, src, warnings)
-        st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings)
+        st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings,
+                         None if feed is None else float(feed))
         st.arc_direction = direction
         _parse(iter_lines(text), st)
         return st
@@ -445,10 +452,11 @@ def read_toolpath(path: str | os.PathLike[str], **kw: Any) -> Toolpath:
     """Read ``path`` as CSV poses if its suffix is ``.csv`` (any case), else as a CL file.
 
     Keyword arguments go to :func:`read_pose_csv` or :func:`read_cl`; ``chordal_tolerance``,
-    ``arc_direction`` and ``frame`` are dropped for CSV files (they have no arcs or frames).
+    ``arc_direction``, ``frame`` and ``feed`` are dropped for CSV files (they have no arcs or
+    frames, and their feed column is per row).
     """
     if Path(path).suffix.lower() == ".csv":
-        for key in ("chordal_tolerance", "arc_direction", "frame"):
+        for key in ("chordal_tolerance", "arc_direction", "frame", "feed"):
             kw.pop(key, None)
         return read_pose_csv(path, **kw)
     return read_cl(path, **kw)

@@ -127,7 +127,7 @@ class ReaderState:
     """Poses, modal state and shared helpers; record handlers (the family modules) act on it."""
 
     def __init__(self, src: str, units: Units, units_given: bool, tol_mm: float, dialect: Dialect,
-                 warnings: Warnings) -> None:
+                 warnings: Warnings, default_feed: float | None = None) -> None:
         self.src = src
         self.units: Units = units
         self.units_given = units_given
@@ -142,7 +142,12 @@ class ReaderState:
         self.motion: dict[int, int] = {}  # pose index -> MOTION code where not a plain feed move
         self.feed_override: dict[int, float] = {}
         # modal runs: (first pose index, feed mm/min or 1/min, inverse time, tool, frame id)
-        self.runs: list[tuple[int, float, bool, int, int]] = [(0, math.nan, False, 0, 0)]
+        # --feed (mm/min): the feed of the feed moves before the first FEDRAT (CAM output such as
+        # NCL's APT source may have no FEDRAT at all)
+        self.default_feed = default_feed
+        self.first_fedrat: int | None = None  # pose count at the first FEDRAT with a feed
+        start_feed = math.nan if default_feed is None else default_feed
+        self.runs: list[tuple[int, float, bool, int, int]] = [(0, start_feed, False, 0, 0)]
         self.events: list[Event | None] = []
         self.frames: list[tuple[np.ndarray, np.ndarray]] = [(np.eye(3), np.zeros(3))]
         self.frame_id = 0
@@ -150,9 +155,9 @@ class ReaderState:
         self.arcs: list[Arc] = []
         self.axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
         self.rapid_next = False
-        self.feed_val = math.nan
+        self.feed_val = start_feed
         self.inverse = False
-        self.feed_problem = "feed move before any FEDRAT"
+        self.feed_problem = "feed move before any FEDRAT: the file gives no feed here; give one with --feed MM/MIN"
         self.fpr: float | None = None  # feed per revolution, mm/rev
         self.rpm: float | None = None
         self.spindle_dir: Literal["CW", "CCW"] = "CW"
@@ -355,11 +360,25 @@ class ReaderState:
             inverse[idx] = False
         feed[rapid] = np.nan
         inverse[rapid] = False
+        notes: tuple[str, ...] = ()
+        if self.default_feed is not None:
+            before = np.arange(n) < (n if self.first_fedrat is None else self.first_fedrat)
+            given = before & ~rapid
+            if self.feed_override:
+                given[np.fromiter(self.feed_override.keys(), dtype=np.int64)] = False
+            used = int(given.sum())
+            if used:
+                first = int(line[np.argmax(given)])
+                notes = (f"FEED {self.default_feed:g} MM/MIN FROM --feed FOR THE {used} FEED MOVES BEFORE THE FIRST "
+                         f"FEDRAT (FROM CL LINE {first})",)
+            else:
+                self.warn(None, f"--feed {self.default_feed:g} not used: a FEDRAT comes before every feed move")
         return Toolpath(
             source=self.src, tip=np.ascontiguousarray(tip), axis=np.ascontiguousarray(axis), line=line,
             rapid=rapid, feed=feed, tool=tool, inverse_time=inverse,
             events=tuple(e for e in self.events if e is not None), part_name=self.part_name, units=self.units,
             warnings=self.warnings.lines(), dialect=self.dialect.describe(self.arc_direction), motion=motion,
+            notes=notes,
         )  # fmt: skip
 
     def _to_common_frame(self, tip: np.ndarray, axis: np.ndarray, frame: np.ndarray, line: np.ndarray
