@@ -24,6 +24,8 @@ MAKINO = SAMPLES / "makino_ffcam_plane1_mm.cldata"
 CREO_ROUGH = SAMPLES / "creo8_schruppen_roughing_mm.ncl"
 CREO_PROFILE = SAMPLES / "creo8_profilfraesen_mm.ncl"
 CREO_THREAD = SAMPLES / "creo_v19_thread_mill_helical_inch.ncl"
+CATIA_ISO = SAMPLES / "catia_v5_isoparametric_5axis_mm.aptsource"
+CL_SUFFIXES = (".cls", ".ncl", ".cldata", ".aptsource")
 
 NX_HEAD = "TOOL PATH/OP,TOOL,EM10\n$$ centerline data\nUNITS/MM\nFEDRAT/MMPM,100\n"  # NX CLSF (4 lines)
 CREO_HEAD = "$$*          Pro/CLfile  Version 8.0 - 8.0.3.0\nUNITS / MM\nFEDRAT / 100.0,  MMPM\n"  # 3 lines
@@ -564,7 +566,7 @@ def test_nx_zlevel_arc_length_and_tangency() -> None:
 
 def test_every_real_sample_reads_without_input_error() -> None:
     for path in sorted(SAMPLES.iterdir()):
-        if path.suffix in (".cls", ".ncl", ".cldata"):
+        if path.suffix in CL_SUFFIXES:
             tp = read_cl(path)
             assert len(tp) > 0 and not any("unknown record" in w for w in tp.warnings), path.name
 
@@ -590,7 +592,7 @@ def test_toolpath_command_writes_what_was_read(tmp_path: Path) -> None:
     assert any(r[6] == "141" for r in cells)
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in SAMPLES.iterdir() if p.suffix in (".cls", ".ncl", ".cldata")))
+@pytest.mark.parametrize("name", sorted(p.name for p in SAMPLES.iterdir() if p.suffix in CL_SUFFIXES))
 def test_check_on_real_samples_never_bad_input(name: str) -> None:
     """Every real sample is read; `check` ends in 0 or 3 (the part may not fit at offset 0), never 2.
 
@@ -679,3 +681,98 @@ def test_defsub_calsub_replays_the_subroutine(tmp_path: Path) -> None:
 def test_bad_subroutines(tmp_path: Path, body: str, line: int, message: str) -> None:
     e = refused(tmp_path, APT_HEAD + "GOTO/0,0,0\n" + body)
     assert e.line == line and message in e.reason
+
+
+# --------------------------------------------------------------------------- CATIA V5 APT
+
+
+def _catia_records(text: str) -> list[tuple[str, str]]:
+    """An independent scan of CATIA's APT: a line ending in '$' continues on the next, the two
+    joined with nothing between them (a number split in two joins into one); '$$' lines are
+    comments."""
+    out: list[tuple[str, str]] = []
+    pending = ""
+    for line in text.splitlines():
+        if not pending and line.lstrip().startswith("$$"):
+            continue
+        if line.rstrip().endswith("$"):
+            pending += line.rstrip()[:-1]
+            continue
+        body, pending = pending + line, ""
+        word, _, args = body.partition("/")
+        out.append((word.strip().upper(), args))
+    return out
+
+
+def test_catia_real_file_reads_as_an_independent_scan_of_it() -> None:
+    records = _catia_records(CATIA_ISO.read_text())
+    tips, axes, rapid, feeds = [], [], [], []
+    next_rapid, feed = False, math.nan
+    for word, args in records:
+        if word == "RAPID":
+            next_rapid = True
+        elif word == "FEDRAT":
+            feed = float(args.split(",")[0])  # every FEDRAT of the file is 'f,MMPM'
+        elif word == "GOTO":
+            values = [float(v) for v in args.split(",")]
+            tips.append(values[:3])
+            axes.append(values[3:])
+            rapid.append(next_rapid)
+            feeds.append(math.nan if next_rapid else feed)
+            next_rapid = False
+    tp = read_cl(CATIA_ISO)
+    assert len(tp) == len(tips) == 163
+    np.testing.assert_allclose(tp.tip, tips, atol=1e-9)
+    np.testing.assert_allclose(tp.axis, np.array(axes) / np.linalg.norm(axes, axis=1)[:, None], atol=1e-12)
+    np.testing.assert_array_equal(tp.rapid, rapid)
+    np.testing.assert_allclose(tp.feed, feeds)
+    # tool axes to 140 deg from vertical: normal CAM output (CL-DIALECTS), read as they are
+    assert np.degrees(np.arccos(tp.axis[:, 2].min())) > 130
+
+
+def test_catia_user_typed_pp_words_give_one_grouped_warning() -> None:
+    tp = read_cl(CATIA_ISO)
+    grouped = [w for w in tp.warnings if "post-processor words typed in CATIA" in w]
+    assert len(grouped) == 1
+    for word, line in (("SFSDFSDF", 27), ("AICC/ON,10", 40), ("INVERSE/ON", 59)):
+        assert f"{word} (line {line})" in grouped[0]
+    assert not any("unknown record" in w for w in tp.warnings)
+
+
+CATIA_HEAD = "$$*CATIA0\n$$ Manufacturing Program.1\nMULTAX\nLOADTL/1\n"  # 4 lines
+
+
+def test_catia_pp_words_in_a_small_file(tmp_path: Path) -> None:
+    text = CATIA_HEAD + "LOOP/START,15\nAICC/ON,10\nqwerty\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\nLOOP/END\n"
+    tp = read(tmp_path, text)
+    grouped = [w for w in tp.warnings if "post-processor words" in w]
+    assert len(grouped) == 1 and grouped[0].startswith(f"{tmp_path / 't.cls'}:5: 4 post-processor words")
+    assert "LOOP/START,15 (line 5), AICC/ON,10 (line 6), QWERTY (line 7), LOOP/END (line 10)" in grouped[0]
+
+
+def test_a_malformed_spindle_record_replaced_before_any_motion_is_a_warning(tmp_path: Path) -> None:
+    from verne_post.toolpath import Spindle
+
+    text = CATIA_HEAD + "SPINDL/900CCLW\nSPINDL/10000,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\n"
+    tp = read(tmp_path, text)
+    [warning] = [w for w in tp.warnings if "is malformed" in w]
+    assert warning.startswith(f"{tmp_path / 't.cls'}:5: SPINDL/900CCLW is malformed")
+    assert "SPINDL/10000,CLW at line 6 replaces it" in warning
+    assert [(e.rpm, e.direction) for e in tp.events if isinstance(e, Spindle)] == [(10000.0, "CW")]
+
+
+@pytest.mark.parametrize("text", [
+    CATIA_HEAD + "SPINDL/900CCLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\nSPINDL/10000,CLW\n",  # motion first
+    CATIA_HEAD + "SPINDL/900CCLW\nFEDRAT/100,MMPM\n",  # nothing replaces it
+    "UNITS/MM\nFEDRAT/100\nSPINDL/900CCLW\nGOTO/0,0,0\n",  # any dialect
+])
+def test_a_malformed_spindle_record_still_in_force_at_a_motion_is_an_error(tmp_path: Path, text: str) -> None:
+    e = refused(tmp_path, text)
+    assert e.line == text.splitlines().index("SPINDL/900CCLW") + 1 and "900CCLW" in e.reason
+
+
+def test_a_tool_change_ends_a_malformed_spindle_record_before_any_motion(tmp_path: Path) -> None:
+    text = CATIA_HEAD + "SPINDL/400CLW\nLOADTL/2\nSPINDL/500,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\n"
+    tp = read(tmp_path, text)
+    [warning] = [w for w in tp.warnings if "is malformed" in w]
+    assert warning.startswith(f"{tmp_path / 't.cls'}:5: SPINDL/400CLW is malformed") and "line 6" in warning

@@ -49,7 +49,7 @@ from verne_post.toolpath import MIN_FEED, Toolpath
 
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes
-from .dialects import ArcDirection, FrameMode, detect_dialect
+from .dialects import DIALECTS, ArcDirection, FrameMode, detect_dialect
 from .lexer import GotoRun, Record, iter_lines, record_runs
 from .machine_functions import MAX_FEED
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
@@ -64,6 +64,7 @@ _FEED_UNIT_RE = re.compile(
 )
 
 Handler = Callable[[ReaderState, Record], None]
+_PP_WORD_RE = re.compile(r"[A-Z][A-Z0-9_]*\Z")  # one word, as a PP word's major word is
 HANDLERS: dict[str, Handler] = {
     **motion.HANDLERS, **curves.HANDLERS, **tools.HANDLERS, **machine_functions.HANDLERS, **frames.HANDLERS,
     **cycle_records.HANDLERS,
@@ -175,13 +176,56 @@ def _decide_units(text: str, override: Units | None, src: str, warnings: Warning
     return "mm"
 
 
+#: Machine-function records whose malformed form a valid one may replace before any motion: CATIA
+#: passes PP words as its user typed them (``SPINDL/900CCLW`` and, on the next line,
+#: ``SPINDL/10000,CLW``); the last valid one is what the machine would run.
+_REPLACEABLE = frozenset({"SPINDL", "FEDRAT", "COOLNT"})
+
+
+def _machine_function(st: ReaderState, rec: Record, handler: Handler) -> None:
+    """Run ``handler``; a malformed record waits (see :data:`_REPLACEABLE`) for a valid one of its
+    word before any motion, which gets a warning naming both lines; motion first is its error."""
+    try:
+        handler(st, rec)
+    except InputError as error:
+        if error.line != rec.line:
+            raise
+        if rec.word not in st.malformed:  # the first malformed one is the one a motion would report
+            st.malformed[rec.word] = (rec.line, f"{rec.word}/{rec.args.strip()}"[:60], error)
+        return
+    bad = st.malformed.pop(rec.word, None)
+    if bad is not None:
+        st.warn(bad[0], f"{bad[1]} is malformed ({bad[2].reason}); {rec.word}/{rec.args.strip()[:40]} at line "
+                f"{rec.line} replaces it before any motion: read as that")
+
+
+def pp_word(st: ReaderState, rec: Record) -> None:
+    """A CATIA PP word its user typed (``LOOP/START,15``, ``AICC/ON,10``, a bare word): kept for one
+    grouped warning. CATIA writes such PP instructions into the APT as typed, for a post-processor
+    that knows them; they are not CL records and move nothing."""
+    text = f"{rec.word}/{rec.args.strip()}" if rec.args.strip() else rec.word
+    st.pp_words.setdefault(text[:40], rec.line)
+
+
+def _pp_words_warning(st: ReaderState) -> None:
+    if not st.pp_words:
+        return
+    shown = sorted(st.pp_words.items(), key=lambda item: item[1])
+    listed = ", ".join(f"{text} (line {line})" for text, line in shown[:8])
+    more = f" and {len(shown) - 8} more" if len(shown) > 8 else ""
+    st.warn(shown[0][1], f"{len(shown)} post-processor words typed in CATIA, not CL records, ignored: {listed}{more}",
+            kind="CATIA PP words")
+
+
 def _dispatch(st: ReaderState, rec: Record) -> None:
     if isinstance(st.curve, curves.PendingSpline) and rec.word not in ("KNOT", "CNTRL"):
         curves.finish_spline(st)
     if "," in rec.word:  # a motion statement's modifier: TLON, GOFWD -> TLON,GOFWD
         rec = rec._replace(word=re.sub(r"\s*,\s*", ",", rec.word))
     handler = HANDLERS.get(rec.word)
-    if handler is not None:
+    if handler is not None and rec.word in _REPLACEABLE:
+        _machine_function(st, rec, handler)
+    elif handler is not None:
         handler(st, rec)
     elif rec.word == "$":
         raise st.fail("continuation '$' at end of file: the record is incomplete", rec.line)
@@ -192,7 +236,11 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
                       "is: offset motion needs the part surfaces): output GOTO points", rec.line)
     elif rec.word in _INFORMATIONAL:
         st.warn(rec.line, _INFORMATIONAL[rec.word], kind=rec.word)
-    elif rec.word not in _IGNORED and not rec.word.startswith(_IGNORED_PREFIXES):
+    elif rec.word in _IGNORED or rec.word.startswith(_IGNORED_PREFIXES):
+        pass
+    elif st.dialect.name == DIALECTS["catia"].name and _PP_WORD_RE.match(rec.word):
+        pp_word(st, rec)
+    else:
         shown = rec.word if len(rec.word) <= 40 else rec.word[:37] + "..."
         st.warn(rec.line, f"unknown record '{shown}' ignored", kind=f"unknown {shown}")
 
@@ -321,6 +369,9 @@ def _run(st: ReaderState, recs: Iterable[Record | GotoRun], subs: _Subroutines, 
 def _parse(lines: Iterable[str], st: ReaderState) -> None:
     subs = _Subroutines()
     _run(st, record_runs(lines), subs, 0)
+    if st.malformed:  # nothing replaced it: the error, as for any record
+        st.motion_after_malformed()
+    _pp_words_warning(st)
     if subs.capturing is not None:
         raise st.fail(f"DEFSUB/{subs.capturing[0][:40]} has no ENDSUB", subs.capturing[1])
     if isinstance(st.curve, curves.PendingSpline):

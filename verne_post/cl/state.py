@@ -181,6 +181,10 @@ class ReaderState:
         self.cutcom_warned = False
         self.done = False
         self.tools: Any = None  # tools.ToolHeader: tool loads and data of the current operation header
+        # A malformed machine-function record (CATIA's user-typed SPINDL/900CCLW) waiting for a valid
+        # one of its word to replace it before any motion: word -> (its line, its text, the error)
+        self.malformed: dict[str, tuple[int, str, InputError]] = {}
+        self.pp_words: dict[str, int] = {}  # CATIA PP words typed by the user (not CL records): text -> first line
 
     # ------------------------------------------------------------------ messages
 
@@ -241,6 +245,7 @@ class ReaderState:
             and (self.tools is None or not self.tools.open)
             and self.multax is not False
             and self.homeless is None
+            and not self.malformed
         )
 
     def push_state(self) -> None:
@@ -268,6 +273,8 @@ class ReaderState:
         if self.homeless is not None:
             raise self.fail("GOHOME without a FROM position (the machine's home is not known here), and motion "
                             "after it", self.homeless)
+        if self.malformed:
+            self.motion_after_malformed()
         if self.tools is not None and self.tools.open:
             self.tools.close(self)
         if not rapid and feed is None and self.feed_val != self.feed_val:
@@ -295,6 +302,11 @@ class ReaderState:
         code = MOTION["rapid"] if rapid else MOTION[motion]
         if code:
             self.motion.update(dict.fromkeys(range(start, len(self.lines)), code))
+
+    def motion_after_malformed(self) -> None:
+        """Motion while a malformed machine-function record is in force: its error, as for any record."""
+        _line, _text, error = min(self.malformed.values(), key=lambda m: m[0])
+        raise error
 
     def take_rapid(self) -> bool:
         r = self.rapid_next
