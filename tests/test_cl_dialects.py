@@ -776,3 +776,35 @@ def test_a_tool_change_ends_a_malformed_spindle_record_before_any_motion(tmp_pat
     tp = read(tmp_path, text)
     [warning] = [w for w in tp.warnings if "is malformed" in w]
     assert warning.startswith(f"{tmp_path / 't.cls'}:5: SPINDL/400CLW is malformed") and "line 6" in warning
+
+
+# --------------------------------------------------------------------------- programs for other machines
+
+
+@pytest.mark.parametrize(("text", "line", "what"), [
+    # CATIA's mill-turn output: TURRET instead of LOADTL, then MMPR feeds and XZ moves
+    (CATIA_HEAD.replace("LOADTL/1", "TURRET/1") + "SPINDL/200,SMM,CLW\nFEDRAT/0.2,MMPR\nGOTO/20,0,5\n", 4, "turning"),
+    ("MODE/TURN\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/0.2,MMPR\nGOTO/20,0,5\n", 1, "turning"),  # Autodesk's ISO 4343 post
+    (APT_HEAD + "GOTO/0,0,0\nHEAD/2\nGOTO/1,0,0\n", 4, "several heads"),
+    (APT_HEAD + "HEAD/BOTH\nGOTO/1,0,0\n", 3, "several heads"),
+])
+def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path, text: str, line: int,
+                                                                   what: str) -> None:
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+    from verne_post.errors import CheckError
+
+    path = tmp_path / "t.cls"
+    path.write_text(text)
+    with pytest.raises(CheckError) as info:
+        read_cl(path)
+    assert info.value.line == line and what in info.value.reason
+    result = CliRunner().invoke(main, ["check", str(path), "-q"])
+    assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
+    assert len(result.stderr.splitlines()) == 1
+
+
+def test_mode_mill_is_read(tmp_path: Path) -> None:
+    tp = read(tmp_path, "MODE/MILL\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/100,MMPM\nGOTO/20,0,5\n")
+    assert len(tp) == 1 and not tp.warnings

@@ -73,13 +73,13 @@ HANDLERS: dict[str, Handler] = {
 # Read and knowingly ignored: display, CAM-setup and bookkeeping records that change nothing the
 # machine does. NX: PAINT, DISPLY...; Creo: MACHIN, MFGNO; SolidWorks CAM: CSI_SET_* (tool
 # flute/extension lengths for its own simulation), SETUP/START|END; Makino: SET/MODE,ABSOL
-# (absolute data, the only kind there is here); HSM: MODE, AUXFUN (machine-specific codes);
+# (absolute data, the only kind there is here); HSM: AUXFUN (machine-specific codes);
 # Creo: MOVNRB, a NURBS written beside its own point-to-point GOTOs, which carry the motion (PTC
 # Creo help, "CL Output for NURBS Interpolation": MOVNRB/NEXT "indicates the start of the actual
 # point-to-point output").
 _IGNORED = frozenset({
     "PAINT", "DISPLY", "PEN", "AUTOPS", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
-    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
+    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO",
     "AUXFUN", "OPSKIP", "MOVNRB",
 })  # fmt: skip
 _IGNORED_PREFIXES = ("CSI_SET_",)

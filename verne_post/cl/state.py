@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from verne_post.errors import InputError
+from verne_post.errors import CheckError, InputError
 from verne_post.toolpath import MOTION_KINDS, Event, Toolpath
 
 from .dialects import Dialect
@@ -190,6 +190,11 @@ class ReaderState:
 
     def fail(self, reason: str, line: int | None) -> InputError:
         return InputError(reason, source=self.src, line=line)
+
+    def other_machine(self, reason: str, line: int | None) -> CheckError:
+        """A well-formed program for another kind of machine (a lathe, several heads): exit code 3,
+        as for any program this machine cannot run."""
+        return CheckError(reason, source=self.src, line=line)
 
     def warn(self, line: int | None, text: str, kind: str | None = None) -> None:
         self.warnings.add(line, text, kind)
