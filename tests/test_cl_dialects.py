@@ -299,9 +299,12 @@ def test_creo_records_as_its_supported_cl_data_commands_define_them(tmp_path: Pa
     assert [e.mode for e in tp.events if isinstance(e, Coolant)] == ["FLOOD"]
     assert tp.feed[1] == pytest.approx(2 * 304.8)
     np.testing.assert_allclose(tp.tip[tp.line == 9], [[10, 0, 30], [10, 0, 2], [10, 0, -5], [10, 0, 30]])
+    from verne_post.errors import CheckError
+
     for head in ("HEAD / BOTH", "HEAD / 2, OPTION, 1"):
-        e = refused(tmp_path, CREO_HEAD + f"GOTO / 0, 0, 40\n{head}\nGOTO / 1, 0, 40\n")
-        assert e.line == 5 and "one spindle" in e.reason
+        with pytest.raises(CheckError) as info:  # a program for another machine: exit 3
+            read(tmp_path, CREO_HEAD + f"GOTO / 0, 0, 40\n{head}\nGOTO / 1, 0, 40\n")
+        assert info.value.line == 5 and "one spindle" in info.value.reason
 
 
 def test_arc_direction_override(tmp_path: Path) -> None:
