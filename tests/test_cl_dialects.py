@@ -811,3 +811,50 @@ def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path
 def test_mode_mill_is_read(tmp_path: Path) -> None:
     tp = read(tmp_path, "MODE/MILL\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/100,MMPM\nGOTO/20,0,5\n")
     assert len(tp) == 1 and not tp.warnings
+
+
+# --------------------------------------------------------------------------- frames by the tool's direction
+
+
+def _nx_msys_down(axis_k: float) -> str:
+    """NX CLSF with MSYS/0,0,0,0,1,0,1,0,0 (X and Y swapped: Z down in the absolute frame) and GOTOs
+    whose tool axis is (0,0,axis_k) in the MCS: CL-DIALECTS's two real cases."""
+    rows = "".join(f"GOTO/{x:.1f},{0.5 * x:.1f},-5.0,0.0,0.0,{axis_k:.1f}\n" for x in range(10))
+    return NX_HEAD + "MSYS/10,20,30,0,1,0,1,0,0\n" + rows  # MSYS on line 5
+
+
+def test_msys_down_with_axes_up_in_the_mcs_is_read_in_the_mcs(tmp_path: Path) -> None:
+    tp = read(tmp_path, _nx_msys_down(1.0))
+    np.testing.assert_allclose(tp.axis, np.tile([0.0, 0.0, 1.0], (10, 1)))
+    np.testing.assert_allclose(tp.tip[3], [3.0, 1.5, -5.0])
+    assert tp.notes == () and not any("frames read as" in w for w in tp.warnings)
+
+
+def test_msys_down_with_axes_down_in_the_mcs_is_applied(tmp_path: Path) -> None:
+    """The variable-contour case: every axis down in the MCS; mapped by MSYS (tip = o + R p,
+    R's columns X = (0,1,0), Y = (1,0,0), Z = X x Y = (0,0,-1)) the tool points up."""
+    tp = read(tmp_path, _nx_msys_down(-1.0))
+    np.testing.assert_allclose(tp.axis, np.tile([0.0, 0.0, 1.0], (10, 1)), atol=1e-12)
+    x = 3.0
+    np.testing.assert_allclose(tp.tip[3], [10 + 0.5 * x, 20 + x, 30 + 5.0], atol=1e-12)
+    [warning] = [w for w in tp.warnings if "frames read as apply" in w]
+    assert "--frame local overrides" in warning and "100%" in warning
+    assert len(tp.notes) == 1 and tp.notes[0].startswith("FRAMES READ AS APPLY")
+    forced = read(tmp_path, _nx_msys_down(-1.0), frame="local")  # --frame is obeyed, and says what would fit
+    np.testing.assert_allclose(forced.axis[:, 2], -1.0)
+    assert forced.frame_hint == "--frame apply" and any("with --frame apply it points away" in w
+                                                          for w in forced.warnings)
+
+
+def test_a_header_records_the_frame_choice(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    path = tmp_path / "down.cls"
+    path.write_text(_nx_msys_down(-1.0).replace("TOOL PATH/OP,TOOL,EM10", "TOOL PATH/OP,TOOL,EM10\nLOAD/TOOL,1"))
+    out = tmp_path / "down.nc"
+    result = CliRunner().invoke(main, [str(path), "-o", str(out), "--work-offset", "auto", "--tool-length", "60",
+                                       "--no-timing", "-q"])
+    assert result.exit_code == 0, result.stderr
+    assert "(CL READING FRAMES READ AS APPLY: THE TOOL AXES POINT AWAY FROM THE TABLE" in out.read_text()

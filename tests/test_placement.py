@@ -223,9 +223,11 @@ def test_place_reads_with_the_frame_it_is_given(tmp_path: Path) -> None:
                                "END-OF-PATH", ""]))
     code, _, err = run("place", str(path), "--frame", "local", "-q")
     assert code == 3 and "tilted 180.0 deg" in err, err
-    code, out, err = run("place", str(path), "--frame", "apply", "-q")
-    assert code == 0, err
-    assert out.startswith("work offset ")
+    assert "(with --frame apply the tool axes point away from the table)" in err  # which --frame would
+    for frame in (["--frame", "apply"], []):  # without --frame: the reading with the tool above the part
+        code, out, err = run("place", str(path), *frame, "-q")
+        assert code == 0, err
+        assert out.startswith("work offset ")
 
 
 def test_check_with_an_automatic_offset_fails_with_the_placement_reason_only(tmp_path: Path) -> None:

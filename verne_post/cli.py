@@ -802,8 +802,9 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     if report_path:
         write_json(report_path, {"source": toolpath.source, "machine": machine.source, **placement.to_dict()})
     if not placement.feasible:
+        hint = f" (with {toolpath.frame_hint} the tool axes point away from the table)" if toolpath.frame_hint else ""
         click.echo(f"verne-post: error: {toolpath.source}: no work offset lets the whole program run: "
-                   f"{placement.reason}", err=True)
+                   f"{placement.reason}{hint}", err=True)
         sys.exit(3)
     x, y, z = placement.offset
     click.echo(f"work offset {x:.3f} {y:.3f} {z:.3f} mm (part zero in the table frame)")

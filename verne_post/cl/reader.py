@@ -37,7 +37,7 @@ import math
 import os
 import re
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -429,36 +429,91 @@ def read_cl(
     if not (isinstance(chordal_tolerance, (int, float)) and 1e-6 <= chordal_tolerance <= 10.0):
         raise InputError(f"chordal tolerance must be from 1e-6 to 10 mm, got {chordal_tolerance!r}")
     text = _read_text(path, src)
-    dialect = detect_dialect(text).with_overrides(arc_direction, frame)
+    found = detect_dialect(text)
 
-    def attempt(text: str, direction: ArcDirection) -> ReaderState:
-        warnings = Warnings(src)
-        file_units = _decide_units(text, override, src, warnings)
-        st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings,
-                         None if feed is None else float(feed))
-        st.arc_direction = direction
-        _parse(iter_lines(text), st)
+    def reading(frames: FrameMode | None) -> ReaderState:
+        dialect = found.with_overrides(arc_direction, frames)
+
+        def attempt(direction: ArcDirection) -> ReaderState:
+            warnings = Warnings(src)
+            file_units = _decide_units(text, override, src, warnings)
+            st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings,
+                             None if feed is None else float(feed))
+            st.arc_direction = direction
+            _parse(iter_lines(text), st)
+            return st
+
+        st = attempt(dialect.arc_direction or "ccw")
+        ccw, cw, first_ccw, first_cw = _arc_evidence(st)
+        if dialect.arc_direction is not None:
+            against, first = (cw, first_cw) if dialect.arc_direction == "ccw" else (ccw, first_ccw)
+            agree = ccw + cw - against
+            if against > agree:
+                given = "as given by --arc-direction" if arc_direction else f"as {dialect.name} documents"
+                raise InputError(
+                    f"arcs run {'counter-clockwise' if dialect.arc_direction == 'ccw' else 'clockwise'} about the "
+                    f"CIRCLE axis {given}, but {against} of {ccw + cw} tangent moves into and out of the file's "
+                    f"arcs say the other way (this arc among them): check the CAM system, or give --arc-direction",
+                    source=src, line=first)
+        elif cw > ccw:
+            st = attempt("cw")
+        elif ccw == cw and st.arcs:
+            st.warn(st.arcs[0].line, "no tangent move tells the arc direction: counter-clockwise about the CIRCLE "
+                    "axis assumed (give --arc-direction to choose)")
         return st
 
-    st = attempt(text, dialect.arc_direction or "ccw")
-    ccw, cw, first_ccw, first_cw = _arc_evidence(st)
-    if dialect.arc_direction is not None:
-        against, first = (cw, first_cw) if dialect.arc_direction == "ccw" else (ccw, first_ccw)
-        agree = ccw + cw - against
-        if against > agree:
-            given = "as given by --arc-direction" if arc_direction else f"as {dialect.name} documents"
-            raise InputError(
-                f"arcs run {'counter-clockwise' if dialect.arc_direction == 'ccw' else 'clockwise'} about the "
-                f"CIRCLE axis {given}, but {against} of {ccw + cw} tangent moves into and out of the file's "
-                f"arcs say the other way (this arc among them): check the CAM system, or give --arc-direction",
-                source=src, line=first)
-    elif cw > ccw:
-        st = attempt(text, "cw")
-    elif ccw == cw and st.arcs:
-        st.warn(st.arcs[0].line, "no tangent move tells the arc direction: counter-clockwise about the CIRCLE "
-                "axis assumed (give --arc-direction to choose)")
-    del text  # the toolpath's arrays need the room
-    return st.result()
+    st = reading(frame)
+    if not (_FRAME_RE.search(text) and (frame or found.frames) in ("local", "apply")):
+        text = ""  # the toolpath's arrays need the room
+        return st.result()
+    return _frame_by_tool_direction(st.result(), frame, found.frames, lambda other: reading(other).result())
+
+
+# Frame records whose reading (the data in the frame, or mapped by it) can turn the tool over.
+_FRAME_RE = re.compile(r"^[ \t]*(?:MSYS|CSYS|ORIGIN)[ \t]*/", re.IGNORECASE | re.MULTILINE)
+
+
+def _up_share(tp: Toolpath) -> float:
+    """The share of the poses whose tool axis points away from the table (k > 0 in the part frame,
+    whose Z is the table's: the work offset only translates)."""
+    return float(np.mean(tp.axis[:, 2] > 1e-9))
+
+
+def _frame_by_tool_direction(tp: Toolpath, given: FrameMode | None, default: FrameMode,
+                             reading: Callable[[FrameMode], Toolpath]) -> Toolpath:
+    """Of the two readings of a file's frame records, the one under which the tool points away
+    from the table for most poses.
+
+    NX's MSYS says where the MCS sits in NX's absolute frame, and its CLSF documentation puts the
+    GOTO data in the MCS (the ``local`` reading); yet real NX files exist both ways (CL-DIALECTS:
+    drilling files with MSYS Z down and tool axes +Z in the MCS, a variable-contour file with MSYS
+    Z down and every axis down in the MCS). A tool pointing into the table is never the meaning:
+    of the readings ``local`` and ``apply``, the one with the tool above the part for most poses
+    is taken, with a warning and a note for the program header. ``--frame`` (``given``) is obeyed;
+    when it turns the tool down and the other reading would not, a warning says so.
+    """
+    share = _up_share(tp)
+    if share > 0.5:
+        return tp
+    other: FrameMode = "apply" if (given or default) == "local" else "local"
+    try:
+        alternative = reading(other)
+    except InputError:
+        return tp  # the other reading is not even readable: the first one's outcome stands
+    other_share = _up_share(alternative)
+    if other_share <= 0.5:
+        return tp
+    first = int(tp.line[0])
+    if given is not None:
+        hint = (f"--frame {given}: the tool axis points into the table at {1 - share:.0%} of the poses; with "
+                f"--frame {other} it points away from it at {other_share:.0%}")
+        return replace(tp, warnings=(*tp.warnings, f"{tp.source}:{first}: {hint}"), frame_hint=f"--frame {other}")
+    how = {"apply": "mapped by the frame records into the part frame", "local": "in the frame the records describe"}
+    text = (f"frames read as {other} (the data {how[other]}), not {given or default}: so the tool axis points away "
+            f"from the table at {other_share:.0%} of the poses, against {share:.0%}; --frame {default} overrides")
+    return replace(alternative, warnings=(*alternative.warnings, f"{tp.source}:{first}: {text}"),
+                   notes=(*alternative.notes, f"FRAMES READ AS {other.upper()}: THE TOOL AXES POINT AWAY FROM THE "
+                                              f"TABLE (--frame {default} OVERRIDES)"))
 
 
 _CSV_COLUMNS = ("x", "y", "z", "i", "j", "k")
