@@ -858,3 +858,41 @@ def test_a_header_records_the_frame_choice(tmp_path: Path) -> None:
                                        "--no-timing", "-q"])
     assert result.exit_code == 0, result.stderr
     assert "(CL READING FRAMES READ AS APPLY: THE TOOL AXES POINT AWAY FROM THE TABLE" in out.read_text()
+
+
+# --------------------------------------------------------------------------- rotary indexing (ROTATE)
+
+
+def _rx(degrees: float) -> np.ndarray:
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def test_pro_engineer_rotate_indexes_between_subroutine_calls(tmp_path: Path) -> None:
+    """As Pro/ENGINEER writes a 4-axis index pattern: the subroutine's points are written in the
+    part turned by the table; in the part frame the k-th call's points are R(-t_k) m, t_k the
+    angle after k increments of -36 degrees about X."""
+    body = "DEFSUB/1\nRAPID\nGOTO / 10, 0, 50, 0, 0, 1\nGOTO / 10, 0, 40\nGOTO / 20, 0, 40\nENDSUB\n"
+    calls = "CALSUB/1\n" + "ROTATE / AAXIS, INCR, -36.000000, CCLW\nCALSUB/1\n" * 2
+    tp = read(tmp_path, CREO_HEAD + body + calls)
+    m = np.array([[10.0, 0, 50], [10, 0, 40], [20, 0, 40]])
+    expected = np.vstack([m @ _rx(36.0 * k).T for k in range(3)])
+    np.testing.assert_allclose(tp.tip, expected, atol=1e-9)
+    np.testing.assert_allclose(tp.axis, np.vstack([np.tile(_rx(36.0 * k) @ [0, 0, 1], (3, 1)) for k in range(3)]),
+                               atol=1e-12)
+    assert tp.rapid[[0, 3, 6]].all()
+
+
+def test_rotate_atangl_sets_the_angle_and_clw_only_says_the_way_round(tmp_path: Path) -> None:
+    text = APT_HEAD + ("GOTO/0,10,0,0,0,1\nROTATE/AAXIS,ATANGL,90,CLW\nGOTO/0,10,0,0,0,1\n"
+                       "ROTATE/AAXIS,INCR,90,CCLW\nGOTO/0,10,0,0,0,1\nROTATE/AAXIS,ATANGL,0\nGOTO/0,10,0,0,0,1\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[0, 10, 0], [0, 0, -10], [0, -10, 0], [0, 10, 0]], atol=1e-9)
+    np.testing.assert_allclose(tp.axis, [[0, 0, 1], [0, 1, 0], [0, 0, -1], [0, 0, 1]], atol=1e-12)
+
+
+@pytest.mark.parametrize("record", ["ROTATE/AAXIS,ABSOL,90", "ROTATE/90", "ROTATE/AAXIS,BAXIS,90",
+                                    "ROTATE/CAXIS,INCR,10,20"])
+def test_rotate_forms_not_documented_are_refused(tmp_path: Path, record: str) -> None:
+    e = refused(tmp_path, APT_HEAD + f"GOTO/0,0,0\n{record}\nGOTO/0,0,0\n")
+    assert e.line == 4 and "only ROTATE/AAXIS|BAXIS|CAXIS" in e.reason

@@ -92,8 +92,9 @@ _REJECTED = {
        for w in ("MCS", "MCSYS")},
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
+    # ROTATE's index form is read (frames.rotate); these move a rotary axis in forms not documented
     **{w: f"{w} (a rotary axis moved by the CL data) is not supported: give 5-axis tool axes in GOTO records"
-       for w in ("ROTABL", "ROTATE", "ROTHED")},
+       for w in ("ROTABL", "ROTHED")},
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
     **{w: f"motion record {w} is not supported: the CL file must contain explicit GOTO points"
        for w in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN", "GO")},

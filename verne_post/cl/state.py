@@ -152,6 +152,7 @@ class ReaderState:
         self.frames: list[tuple[np.ndarray, np.ndarray]] = [(np.eye(3), np.zeros(3))]
         self.frame_id = 0
         self.frame_declared = False  # a frame record has been read
+        self.index: tuple[int, int, float] | None = None  # ROTATE: (axis 0-2, the frame indexed, angle deg)
         self.arcs: list[Arc] = []
         self.axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
         self.rapid_next = False
