@@ -896,3 +896,13 @@ def test_rotate_atangl_sets_the_angle_and_clw_only_says_the_way_round(tmp_path: 
 def test_rotate_forms_not_documented_are_refused(tmp_path: Path, record: str) -> None:
     e = refused(tmp_path, APT_HEAD + f"GOTO/0,0,0\n{record}\nGOTO/0,0,0\n")
     assert e.line == 4 and "only ROTATE/AAXIS|BAXIS|CAXIS" in e.reason
+
+
+def test_catia_positional_cycle_with_empty_fields_is_refused_with_its_reason(tmp_path: Path) -> None:
+    """CATIA's cycle syntax comes from the PP word table of its machine (Dassault, "PP Tables and PP
+    Word Syntaxes"), which the APT file does not carry: the continued record (its continuation
+    line starting with a comma) is read whole, and refused as what it is, not as a bad number."""
+    text = CATIA_HEAD + ("FEDRAT/100,MMPM\nGOTO/0,0,10,0,0,1\nCYCLE/DRILL, 35.000000,,0,0, 1.000000, 1000.000000$\n"
+                         ",   70.000000,ON,0,0,0\nGOTO/0,0,0,0,0,1\nCYCLE/OFF\n")
+    e = refused(tmp_path, text)
+    assert e.line == 7 and "PP word table" in e.reason and "empty field" not in e.reason

@@ -32,8 +32,8 @@ def cycle(st: ReaderState, rec: Record) -> None:
         # number is the depth, the clearance or the feed cannot be known from it.
         raise st.fail(f"CYCLE/{rec.args.split(',')[0].strip()[:20]}: CATIA's positional cycle (fields and empty fields "
                       "as the PP word table of its machine defines them, which the APT file does not carry): the "
-                      "depth, clearance and feed cannot be told apart; output the cycle with a PP table whose syntax names "
-                      "them (CYCLE/DRILL,DEPTH,d,CLEAR,c,MMPM,f) or as GOTO moves", rec.line)
+                      "depth, clearance and feed cannot be told apart; output the cycle with a PP table whose syntax "
+                      "names them (CYCLE/DRILL,DEPTH,d,CLEAR,c,MMPM,f) or as GOTO moves", rec.line)
     toks = st.tokens(rec.args, "CYCLE", rec.line)
     if not toks or not isinstance(toks[0], str):
         raise st.fail("CYCLE needs a cycle type (e.g. CYCLE/DRILL or CYCLE/OFF)", rec.line)
