@@ -905,4 +905,4 @@ def test_catia_positional_cycle_with_empty_fields_is_refused_with_its_reason(tmp
     text = CATIA_HEAD + ("FEDRAT/100,MMPM\nGOTO/0,0,10,0,0,1\nCYCLE/DRILL, 35.000000,,0,0, 1.000000, 1000.000000$\n"
                          ",   70.000000,ON,0,0,0\nGOTO/0,0,0,0,0,1\nCYCLE/OFF\n")
     e = refused(tmp_path, text)
-    assert e.line == 7 and "PP word table" in e.reason and "empty field" not in e.reason
+    assert e.line == 7 and "PP word table" in e.reason and "empty field in CYCLE" not in e.reason
