@@ -735,7 +735,7 @@ def test_catia_real_file_reads_as_an_independent_scan_of_it() -> None:
 
 def test_catia_user_typed_pp_words_give_one_grouped_warning() -> None:
     tp = read_cl(CATIA_ISO)
-    grouped = [w for w in tp.warnings if "post-processor words typed in CATIA" in w]
+    grouped = [w for w in tp.warnings if "post-processor words in CATIA's output" in w]
     assert len(grouped) == 1
     for word, line in (("SFSDFSDF", 27), ("AICC/ON,10", 40), ("INVERSE/ON", 59)):
         assert f"{word} (line {line})" in grouped[0]

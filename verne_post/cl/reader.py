@@ -201,9 +201,10 @@ def _machine_function(st: ReaderState, rec: Record, handler: Handler) -> None:
 
 
 def pp_word(st: ReaderState, rec: Record) -> None:
-    """A CATIA PP word its user typed (``LOOP/START,15``, ``AICC/ON,10``, a bare word): kept for one
-    grouped warning. CATIA writes such PP instructions into the APT as typed, for a post-processor
-    that knows them; they are not CL records and move nothing."""
+    """A CATIA PP word (``LOOP/START,15``, ``AICC/ON,10``, a bare word, ``TOOLNO/13,1``): kept for
+    one grouped warning. CATIA writes its PP table's syntaxes and its user's PP instructions into
+    the APT as they are (Dassault, NC Manufacturing, "PP Tables and PP Word Syntaxes" and the "PP
+    Instruction" operation), for a post-processor that knows them; they move nothing here."""
     text = f"{rec.word}/{rec.args.strip()}" if rec.args.strip() else rec.word
     st.pp_words.setdefault(text[:40], rec.line)
 
@@ -214,8 +215,8 @@ def _pp_words_warning(st: ReaderState) -> None:
     shown = sorted(st.pp_words.items(), key=lambda item: item[1])
     listed = ", ".join(f"{text} (line {line})" for text, line in shown[:8])
     more = f" and {len(shown) - 8} more" if len(shown) > 8 else ""
-    st.warn(shown[0][1], f"{len(shown)} post-processor words typed in CATIA, not CL records, ignored: {listed}{more}",
-            kind="CATIA PP words")
+    st.warn(shown[0][1], f"{len(shown)} post-processor words in CATIA's output (its PP table's or typed by its user), "
+            f"not CL records, ignored: {listed}{more}", kind="CATIA PP words")
 
 
 def _dispatch(st: ReaderState, rec: Record) -> None:
