@@ -790,6 +790,9 @@ def test_a_tool_change_ends_a_malformed_spindle_record_before_any_motion(tmp_pat
     ("MODE/TURN\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/0.2,MMPR\nGOTO/20,0,5\n", 1, "turning"),  # Autodesk's ISO 4343 post
     (APT_HEAD + "GOTO/0,0,0\nHEAD/2\nGOTO/1,0,0\n", 4, "several heads"),
     (APT_HEAD + "HEAD/BOTH\nGOTO/1,0,0\n", 3, "several heads"),
+    # CATIA's Lathe Machining sample: CHANNEL,1 on a multi-turret lathe, TOOLNO/1,TURN, MMPR feeds
+    ("$$*CATIA0\nCHANNEL,1\nTOOLNO/1,TURN\nFEDRAT/ 0.4000,MMPR\n", 2, "several"),
+    ("$$*CATIA0\nCUTTER/ 1.000000\nTOOLNO/1,TURN\nFEDRAT/ 0.4000,MMPR\nGOTO / 77.0, 0.0, 45.0\n", 3, "turning"),
 ])
 def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path, text: str, line: int,
                                                                    what: str) -> None:

@@ -225,6 +225,15 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
     if "," in rec.word:  # a motion statement's modifier: TLON, GOFWD -> TLON,GOFWD
         rec = rec._replace(word=re.sub(r"\s*,\s*", ",", rec.word))
     handler = HANDLERS.get(rec.word)
+    if rec.word == "TOOLNO" and "TURN" in (w.strip().upper() for w in rec.args.split(",")):
+        # CATIA's lathe output names its tool TOOLNO/n,TURN (Dassault, Lathe Machining user's guide,
+        # its APT sample: TOOLNO/1,TURN, FEDRAT/...,MMPR, GOTO/x,0,z)
+        raise st.other_machine(f"TOOLNO/{rec.args.strip()[:40]}: a turning tool; this is a turning program (for a "
+                               "lathe), and the VERNE is a milling machine and cannot turn", rec.line)
+    if rec.word.partition(",")[0] == "CHANNEL":
+        # CATIA's output for a multi-turret machine opens with CHANNEL,n (the same sample)
+        raise st.other_machine(f"{rec.word[:40]}: a program for one channel of a machine with several (turrets or "
+                               "heads); the VERNE has one spindle and one channel", rec.line)
     if handler is not None and rec.word in _REPLACEABLE:
         _machine_function(st, rec, handler)
     elif handler is not None:
