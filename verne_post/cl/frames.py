@@ -116,9 +116,12 @@ def rotate(st: ReaderState, rec: Record) -> None:
     Creo and Vericut do with a table index: with the table at angle t (right-handed about the
     axis through the CL origin), a point written at m is the part's point R(-t) m.
 
-    ``ATANGL`` (the default) sets the angle, ``INCR`` adds to it; ``CLW``/``CCLW`` say which way
-    round the table turns to get there, which changes where the data lie not at all (the move
-    between is a retract, an index and an approach). Any other form is refused.
+    The fields are those of NX's Rotate event (NX Post Builder, ``pblib/ude.cdl``, EVENT rotate: the
+    axis Aaxis|Baxis|Caxis, the type Absolute|Incremental, the direction CLW|CCLW and the angle as
+    separate parameters). ``ATANGL`` (the default) sets the angle, ``INCR`` adds to it;
+    ``CLW``/``CCLW`` say which way round the table turns to get there, which changes where the data
+    lie not at all (the move between is a retract, an index and an approach). Any other form is
+    refused.
     """
     toks = st.tokens(rec.args, "ROTATE", rec.line)
     words = [t for t in toks if isinstance(t, str)]
