@@ -289,6 +289,11 @@ def _format_validation_error(error: ValidationError) -> str:
 MAX_FILE_BYTES = 1 << 20
 MAX_DEPTH = 16
 MAX_VALUES = 100_000
+#: Characters of one number: far more than any float's 17 significant digits and exponent. A
+#: longer one is a mistake (and an integer of more than 4,300 digits would make Python's int()
+#: raise its own ValueError).
+MAX_NUMBER_CHARS = 100
+_NUMBER_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float"})
 
 
 class _MachineLoader(yaml.SafeLoader):
@@ -336,13 +341,17 @@ def _parse_yaml(text: str, source: str) -> object:
 
 
 def _count_values(root: yaml.Node, source: str) -> None:
-    """Refuse more than :data:`MAX_VALUES` values counting every alias use (an alias bomb)."""
+    """Refuse more than :data:`MAX_VALUES` values counting every alias use (an alias bomb), and
+    numbers longer than :data:`MAX_NUMBER_CHARS` characters."""
     stack, count = [root], 0
     while stack:
         node = stack.pop()
         count += 1
         if count > MAX_VALUES:
             raise InputError(f"more than {MAX_VALUES} values (aliases expanded)", source, node.start_mark.line + 1)
+        if isinstance(node, yaml.ScalarNode) and node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
+            raise InputError(f"a number of {len(node.value)} characters (at most {MAX_NUMBER_CHARS})", source,
+                             node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             stack.extend(child for pair in node.value for child in pair)
         elif isinstance(node, yaml.SequenceNode):
