@@ -381,6 +381,22 @@ def load_machine(path: str | Path | None = None) -> Machine:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("machine file is not UTF-8 text", source) from None
+    return machine_from_text(text, source)
+
+
+def machine_text(path: str | Path | None = None) -> str:
+    """The text of a machine file (``None``: the shipped VERNE), for tools that edit it."""
+    if path is None:
+        return (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_text(encoding="utf-8")
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return handle.read(MAX_FILE_BYTES + 1)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read machine file: {getattr(exc, 'strerror', None) or exc}", str(path)) from None
+
+
+def machine_from_text(text: str, source: str) -> Machine:
+    """Parse and validate the text of a machine file (``source`` names it in messages)."""
     data = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)

@@ -125,7 +125,7 @@ class _Problem:
         return self._stack(d_tip[:, :, self.free] * scale, d_axis[:, :, self.free] * scale)
 
 
-def _directions(jac: np.ndarray, names: list[str], sigma: float | None
+def directions(jac: np.ndarray, names: list[str], sigma: float | None
                 ) -> tuple[np.ndarray, np.ndarray, list[Direction]]:
     """Relative singular values of the column-normalised Jacobian, the right singular vectors, and
     the identifiability table; ``std`` from the unnormalised SVD when the noise ``sigma`` is known."""
@@ -146,7 +146,7 @@ def _directions(jac: np.ndarray, names: list[str], sigma: float | None
     return relative, vt, table
 
 
-def _hold_for(vector: np.ndarray, names: list[str]) -> str:
+def hold_for(vector: np.ndarray, names: list[str]) -> str:
     """The parameter to hold for a dependent direction: of those taking part in it (component
     at least 0.3 of the largest), the first in :data:`HOLD_ORDER`."""
     weight = np.abs(vector) / np.max(np.abs(vector))
@@ -154,7 +154,7 @@ def _hold_for(vector: np.ndarray, names: list[str]) -> str:
     return min(involved, key=HOLD_ORDER.index)
 
 
-def _describe(vector: np.ndarray, names: list[str]) -> str:
+def describe(vector: np.ndarray, names: list[str]) -> str:
     v = vector / np.max(np.abs(vector))
     return " ".join(f"{v[j]:+.2f} {names[j]}" for j in np.argsort(-np.abs(v)) if abs(v[j]) >= 0.1)
 
@@ -193,7 +193,7 @@ def calibrate(p0: np.ndarray, poses: Poses, fix: tuple[str, ...] = (), reject: b
             break
         used = used & ~outlier
     names = [PARAMETERS[k] for k in free]
-    _, _, table = _directions(jac, names, sigma)
+    _, _, table = directions(jac, names, sigma)
     std = np.full(len(PARAMETERS), np.nan)
     try:
         covariance = sigma**2 * np.linalg.inv(jac.T @ jac)
@@ -214,12 +214,12 @@ def _fit_used(p0: np.ndarray, poses: Poses, used: np.ndarray, status: dict[str, 
         problem = _Problem(p0, subset, free)
         _check_count(problem, free)
         names = [PARAMETERS[k] for k in free]
-        relative, vt, _ = _directions(problem.jac(np.zeros(len(free))), names, None)
+        relative, vt, _ = directions(problem.jac(np.zeros(len(free))), names, None)
         if relative[-1] >= RANK_RTOL:
             break
-        hold = _hold_for(vt[-1], names)
+        hold = hold_for(vt[-1], names)
         status[hold] = "held"
-        reasons[hold] = f"cannot be told apart from the others of {_describe(vt[-1], names)} (exact dependency)"
+        reasons[hold] = f"cannot be told apart from the others of {describe(vt[-1], names)} (exact dependency)"
     # Then fit, and hold what the fit determines no better than the nominal value already is.
     while True:
         free = np.array([k for k, n in enumerate(PARAMETERS) if status[n] == "fitted"])
@@ -237,14 +237,14 @@ def _fit_used(p0: np.ndarray, poses: Poses, used: np.ndarray, status: dict[str, 
             raise FitError("the fit did not converge: at the best geometry found some measured poses have no working "
                            "assembly (the measurements do not fit this machine)")
         names = [PARAMETERS[k] for k in free]
-        relative, vt, table = _directions(jac, names, sigma)
+        relative, vt, table = directions(jac, names, sigma)
         weak = [k for k, d in enumerate(table) if not d.std <= WEAK_STD]
         if not weak:
             return p, jac, sigma, free, found.nfev, str(found.message)
         k = weak[-1]
-        hold = _hold_for(vt[k], names)
+        hold = hold_for(vt[k], names)
         status[hold] = "held"
-        reasons[hold] = (f"the measurements determine {_describe(vt[k], names)} only to {table[k].std:.2g} typical "
+        reasons[hold] = (f"the measurements determine {describe(vt[k], names)} only to {table[k].std:.2g} typical "
                          "errors (weakly identifiable)")
 
 
