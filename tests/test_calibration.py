@@ -7,12 +7,21 @@ are those perturbations, never numbers produced by the calibration under test.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
+from click.testing import CliRunner
 
 import verne_post as vp
 from tests.conftest import random_usable_joints
 from tests.independent import platform_from_tool, rod_residuals
+from verne_post.api import Status, classify, pose_margins
+from verne_post.calibration import PARAMETERS, FitError, Poses, calibrate, parameters_of
+from verne_post.calibration.model import jacobian, predict
+from verne_post.cli import main
 from verne_post.kinematics import machine_ik_all, module_fk_working, module_ik_working, wrap_angle
 
 #: Joint zero offsets used below: rho mm, theta degrees (large enough to matter, small enough
@@ -102,3 +111,328 @@ def test_zero_offsets_leave_results_bit_identical(machine: vp.Machine) -> None:
     ia = vp.inverse_kinematics(machine, a.tip, a.axis)
     ib = vp.inverse_kinematics(zero, a.tip, a.axis)
     assert np.array_equal(ia.joints, ib.joints, equal_nan=True)
+
+
+# ----------------------------------------------------------------------------- calibration
+
+NOISE = 0.003  # mm, standard deviation of each measured coordinate
+HEADER = "rho1,rho2,rho3,theta1,theta2,tool_length,x,y,z"
+SAMPLE_CL = Path(__file__).parent / "data" / "cl-samples" / "creo8_profilfraesen_mm.ncl"
+
+
+def run(*args: str) -> tuple[int, str, str]:
+    result = CliRunner().invoke(main, list(args))
+    return result.exit_code, result.stdout, result.stderr
+
+
+def perturbed(machine: vp.Machine, seed: int = 4) -> tuple[np.ndarray, vp.Machine]:
+    """A VERNE as assembled: 12 geometry values off by 0.2-0.55 mm, slider zeros off by
+    0.06-0.15 mm (random signs). Returns its parameter vector and its machine model."""
+    rng = np.random.default_rng(seed)
+    nominal = parameters_of(machine)
+    truth = nominal.copy()
+    truth[:12] += rng.choice([-1, 1], 12) * rng.uniform(0.2, 0.55, 12)
+    truth[12:15] += rng.choice([-1, 1], 3) * rng.uniform(0.06, 0.15, 3)
+    data = machine.model_dump()
+    for k, name in enumerate(PARAMETERS[:12]):
+        data["geometry"][name] = float(truth[k])
+    for k, name in enumerate(("rho1", "rho2", "rho3")):
+        data["joints"][name]["offset"] = float(truth[12 + k])
+    return truth, vp.Machine.model_validate(data)
+
+
+def measure(true_machine: vp.Machine, nominal: vp.Machine, n: int, seed: int, tools: tuple[float, ...],
+            noise: float = NOISE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Joint readings (mm, rad), tool lengths and tips measured on ``true_machine`` with the
+    project's own FK plus seeded Gaussian noise (mm)."""
+    joints = random_usable_joints(nominal, n, seed)
+    tool = np.resize(np.asarray(tools, float), n)
+    fk = vp.forward_kinematics(true_machine, joints, tool_length=tool)
+    assert fk.reachable.all()
+    tip = fk.tip + np.random.default_rng(seed + 1000).normal(0.0, noise, (n, 3))
+    return joints, tool, tip
+
+
+def write_csv(path: Path, joints: np.ndarray, tool: np.ndarray, tip: np.ndarray, extra: str = "") -> Path:
+    lines = [HEADER + extra]
+    for q, t, x in zip(joints, tool, tip, strict=True):
+        lines.append(",".join(f"{v:.6f}" for v in (*q[:3], *np.degrees(q[3:]), t, *x)))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def assembled(machine: vp.Machine) -> tuple[np.ndarray, vp.Machine]:
+    return perturbed(machine)
+
+
+@pytest.fixture(scope="module")
+def measured(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine], tmp_path_factory: pytest.TempPathFactory
+             ) -> Path:
+    """80 poses, three tools, 3 um noise."""
+    joints, tool, tip = measure(assembled[1], machine, 80, seed=31, tools=(60.0, 80.0, 100.0))
+    return write_csv(tmp_path_factory.mktemp("cal") / "measured.csv", joints, tool, tip)
+
+
+@pytest.fixture(scope="module")
+def calibrated(measured: Path) -> tuple[Path, Path, str]:
+    out = measured.parent / "calibrated.yaml"
+    report = measured.parent / "report.json"
+    code, stdout, stderr = run("calibrate", str(measured), "-o", str(out), "--report", str(report))
+    assert code == 0, stderr
+    return out, report, stdout
+
+
+def test_analytic_jacobian_matches_finite_differences_of_the_fk(machine: vp.Machine) -> None:
+    p = parameters_of(machine) + np.r_[np.zeros(12), 0.1, -0.05, 0.12, 3e-4, -2e-4]
+    joints = random_usable_joints(machine, 60, seed=8)
+    tool = np.resize([60.0, 100.0], 60)
+    d_tip, d_axis = jacobian(p, joints, tool, predict(p, joints, tool))
+    for k in range(len(PARAMETERS)):
+        h = 1e-4 if k < 15 else 1e-7
+        step = np.zeros(len(PARAMETERS))
+        step[k] = h
+        plus = vp.forward_kinematics(_machine_of(machine, p + step), joints, tool_length=tool)
+        minus = vp.forward_kinematics(_machine_of(machine, p - step), joints, tool_length=tool)
+        np.testing.assert_allclose(d_tip[:, :, k], (plus.tip - minus.tip) / (2 * h), atol=2e-5 * max(
+            1.0, np.abs(d_tip[:, :, k]).max()), err_msg=PARAMETERS[k])
+        np.testing.assert_allclose(d_axis[:, :, k], (plus.axis - minus.axis) / (2 * h), atol=1e-6,
+                                   err_msg=PARAMETERS[k])
+
+
+def _machine_of(machine: vp.Machine, p: np.ndarray) -> vp.Machine:
+    """A machine model with parameter vector ``p`` (mm, rad), built through the YAML model."""
+    data = machine.model_dump()
+    for k, name in enumerate(PARAMETERS[:12]):
+        data["geometry"][name] = float(p[k])
+    for k, name in enumerate(("rho1", "rho2", "rho3")):
+        data["joints"][name]["offset"] = float(p[12 + k])
+    for k, name in enumerate(("theta1", "theta2")):
+        data["joints"][name]["offset"] = float(np.degrees(p[15 + k]))
+    return vp.Machine.model_validate(data)
+
+
+def test_common_slider_offset_and_table_height_are_one_thing(machine: vp.Machine,
+                                                             assembled: tuple[np.ndarray, vp.Machine]) -> None:
+    """Why da is held: raising every slider zero and da by the same c changes no tool tip."""
+    truth = assembled[0]
+    shifted = truth + np.r_[np.zeros(10), 0.7, 0.0, 0.7, 0.7, 0.7, 0.0, 0.0]
+    joints = random_usable_joints(machine, 300, seed=12)
+    a = vp.forward_kinematics(_machine_of(machine, truth), joints, tool_length=80.0)
+    b = vp.forward_kinematics(_machine_of(machine, shifted), joints, tool_length=80.0)
+    np.testing.assert_allclose(a.tip, b.tip, atol=1e-8)
+
+
+def test_calibration_recovers_the_perturbation(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine],
+                                               calibrated: tuple[Path, Path, str]) -> None:
+    truth = assembled[0]
+    _, report_path, stdout = calibrated
+    report = json.loads(report_path.read_text())
+    parameters = {p["name"]: p for p in report["parameters"]}
+    assert parameters["da"]["status"] == "held"
+    assert "rho1_offset" in parameters["da"]["reason"] and "held: da" in stdout
+    # With da held at nominal, the slider offsets take its error (previous test): what they
+    # can be is the true offset minus the true da error.
+    da_error = truth[PARAMETERS.index("da")] - parameters_of(machine)[PARAMETERS.index("da")]
+    expected = {name: truth[k] for k, name in enumerate(PARAMETERS)}
+    for name in ("rho1_offset", "rho2_offset", "rho3_offset"):
+        expected[name] -= da_error
+    expected["theta1_offset"] = expected["theta2_offset"] = 0.0
+    scores = []
+    for k, name in enumerate(PARAMETERS):
+        p = parameters[name]
+        if name == "da":
+            assert p["fitted"] == p["nominal"]
+            continue
+        assert p["status"] == "fitted", name
+        want = np.degrees(expected[name]) if name.startswith("theta") else expected[name]
+        error = p["fitted"] - want
+        assert abs(error) < 4.0 * p["std"], (name, error, p["std"])
+        scores.append(error / p["std"])
+        assert p["std"] < (0.15 if name in ("R1", "r1") else 0.03)
+        if k < 12:  # the perturbation itself is far outside the uncertainty (R1 and r1 only weakly separate)
+            assert abs(truth[k] - parameters_of(machine)[k]) > (3 if name in ("R1", "r1") else 10) * p["std"]
+    # the standard deviations are honest: the normalised errors scatter like N(0, 1)
+    assert 0.2 < float(np.mean(np.square(scores))) < 3.0
+
+
+def _predict_with_cli(tmp_path: Path, machine_file: Path | None, joints: np.ndarray, tool_length: float
+                      ) -> np.ndarray:
+    """Tool tips (mm) predicted by 'verne-post fk' from a joints CSV."""
+    source = tmp_path / f"joints_{tool_length:g}.csv"
+    source.write_text("rho1,rho2,rho3,theta1,theta2\n" + "\n".join(
+        ",".join(f"{v:.6f}" for v in (*q[:3], *np.degrees(q[3:]))) for q in joints) + "\n")
+    out = tmp_path / f"tips_{tool_length:g}_{machine_file.stem if machine_file else 'nominal'}.csv"
+    args = ["fk", str(source), "-o", str(out), "--tool-length", str(tool_length)]
+    code, _, stderr = run(*args, *(["--machine", str(machine_file)] if machine_file else []))
+    assert code == 0, stderr
+    table = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    return np.column_stack([table["x"], table["y"], table["z"]])
+
+
+def test_calibrated_file_predicts_other_poses_and_tools(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine],
+                                                        calibrated: tuple[Path, Path, str], tmp_path: Path) -> None:
+    """Done means: 40 other poses, other tools, predicted to about 10 um where the nominal is off by mm."""
+    out = calibrated[0]
+    errors, nominal_errors = [], []
+    for tool_length, seed in ((45.0, 41), (130.0, 42)):
+        joints, _, truth_tip = measure(assembled[1], machine, 20, seed=seed, tools=(tool_length,), noise=0.0)
+        errors.append(_predict_with_cli(tmp_path, out, joints, tool_length) - truth_tip)
+        nominal_errors.append(_predict_with_cli(tmp_path, None, joints, tool_length) - truth_tip)
+    rms = np.sqrt(np.mean(np.sum(np.concatenate(errors) ** 2, axis=1)))
+    nominal_rms = np.sqrt(np.mean(np.sum(np.concatenate(nominal_errors) ** 2, axis=1)))
+    assert rms < 0.010
+    assert nominal_rms > 1.0
+
+
+def test_calibrated_file_keeps_the_input_and_posts(machine: vp.Machine, calibrated: tuple[Path, Path, str],
+                                                   tmp_path: Path) -> None:
+    out = calibrated[0]
+    original_text = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
+    text = out.read_text()
+    for line in original_text.splitlines():  # every comment survives
+        if "#" in line:
+            assert line[line.index("#"):] in text
+    before, after = yaml.safe_load(original_text), yaml.safe_load(text)
+    block = after.pop("calibration")
+    assert block["poses"] == 80 and block["rejected"] == 0 and block["held"] == ["da"]
+    assert block["rms_before"] > 1.0 and block["rms_after"] < 0.008 and block["max_after"] < 0.025
+    assert after["geometry"]["da"] == before["geometry"]["da"]
+    changed = {k for k in before["geometry"] if before["geometry"][k] != after["geometry"][k]}
+    assert changed == set(PARAMETERS[:12]) - {"da"}
+    for name in before["joints"]:
+        offset = after["joints"][name].pop("offset")
+        assert isinstance(offset, float)
+        assert after["joints"][name] == before["joints"][name]
+    for key in before:
+        if key not in ("geometry", "joints"):
+            assert after[key] == before[key], key
+    loaded = vp.load_machine(out)
+    assert loaded.calibration is not None and loaded.calibration.held == ["da"]
+    code, _, stderr = run("post", str(SAMPLE_CL), "--machine", str(out), "-o", str(tmp_path / "cal.nc"), "-q")
+    assert code == 0, stderr
+    code, _, stderr = run("post", str(SAMPLE_CL), "-o", str(tmp_path / "nominal.nc"), "-q")
+    assert code == 0, stderr
+    assert (tmp_path / "cal.nc").read_bytes() != (tmp_path / "nominal.nc").read_bytes()
+
+
+def test_fix_holds_a_parameter(measured: Path, tmp_path: Path) -> None:
+    out = tmp_path / "fixed.yaml"
+    code, _stdout, stderr = run("calibrate", str(measured), "-o", str(out), "--fix", "L1,spindle_nose")
+    assert code == 0, stderr
+    machine = vp.load_machine(out)
+    assert machine.geometry.L1 == 849.97 and machine.geometry.spindle_nose == 495.80
+    assert machine.calibration is not None and {"L1", "spindle_nose", "da"} <= set(machine.calibration.held)
+    # two true errors of 0.2-0.55 mm held at nominal: the residual stays well above the noise
+    assert machine.calibration.rms_after > 0.02
+
+
+def test_outlier_is_flagged_and_rejected(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine],
+                                         tmp_path: Path) -> None:
+    joints, tool, tip = measure(assembled[1], machine, 60, seed=51, tools=(60.0, 80.0, 100.0))
+    tip[17] += [0.0, 0.4, -0.3]  # a probing mistake of 0.5 mm
+    path = write_csv(tmp_path / "outlier.csv", joints, tool, tip)
+    line = 17 + 2  # header on line 1
+    code, stdout, _ = run("calibrate", str(path), "-o", str(tmp_path / "a.yaml"), "--report", str(tmp_path / "a.json"))
+    assert code == 0 and f"lines {line}" in stdout
+    report = json.loads((tmp_path / "a.json").read_text())
+    assert [o["line"] for o in report["outliers"]] == [line]
+    code, stdout, _ = run("calibrate", str(path), "-o", str(tmp_path / "b.yaml"), "--reject")
+    assert code == 0 and "dropped" in stdout
+    kept = vp.load_machine(tmp_path / "b.yaml").calibration
+    assert kept is not None and kept.poses == 59 and kept.rejected == 1 and kept.rms_after < 0.008
+
+
+def test_library_fit_reports_non_convergence(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine]) -> None:
+    joints, tool, tip = measure(assembled[1], machine, 30, seed=61, tools=(80.0,))
+    poses = Poses(joints, tool, tip, np.full((30, 3), np.nan), np.ones(30))
+    with pytest.raises(FitError) as error:
+        calibrate(parameters_of(machine), poses, max_evaluations=1)
+    assert error.value.exit_code == 3 and "did not converge" in str(error.value)
+
+
+def test_html_report_is_self_contained(measured: Path, tmp_path: Path) -> None:
+    report = tmp_path / "r.html"
+    code, _, stderr = run("calibrate", str(measured), "-o", str(tmp_path / "c.yaml"), "--report", str(report))
+    assert code == 0, stderr
+    page = report.read_text()
+    assert page.count("<svg") >= 3 and "<line" in page
+    assert "http://" not in page.replace('xmlns="http://www.w3.org/2000/svg"', "") and "https://" not in page
+    assert "<script" not in page and "<link" not in page
+
+
+BAD_INPUTS = [
+    ("missing column", lambda rows: [rows[0].replace(",z", "")] + [r.rsplit(",", 1)[0] for r in rows[1:]], 1,
+     "lacks column"),
+    ("nan cell", lambda rows: [*rows[:5], rows[5].replace(rows[5].split(",")[6], "nan", 1), *rows[6:]], 6, "finite"),
+    ("out of range", lambda rows: [*rows[:9], "1400.0," + rows[9].split(",", 1)[1], *rows[10:]], 10, "travel"),
+    ("unreachable", lambda rows: [*rows[:3], "1290,0,1290,0,0,80,0,0,0", *rows[4:]], 4, "cannot be at"),
+    ("far from the model", lambda rows: [*rows[:7], ",".join([*rows[7].split(",")[:6], "900", "900", "0"]),
+                                         *rows[8:]], 8, "from where the machine file puts it"),
+    ("too few poses", lambda rows: rows[:5], 5, "poses for 17 free parameters"),
+]
+
+
+@pytest.mark.parametrize(("what", "edit", "line", "words"), BAD_INPUTS, ids=[b[0] for b in BAD_INPUTS])
+def test_bad_measurements_are_refused_at_their_line(measured: Path, tmp_path: Path, what: str, edit, line: int,
+                                                    words: str) -> None:
+    rows = measured.read_text().splitlines()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(edit(rows)) + "\n")
+    out, report = tmp_path / "out.yaml", tmp_path / "out.json"
+    code, _stdout, stderr = run("calibrate", str(bad), "-o", str(out), "--report", str(report))
+    assert code == 2, (what, stderr)
+    assert stderr.count("\n") == 1 and f"{bad}:{line}:" in stderr and words in stderr, stderr
+    assert not out.exists() and not report.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
+
+
+def test_plan_picks_checked_poses_that_identify_the_parameters(machine: vp.Machine,
+                                                               assembled: tuple[np.ndarray, vp.Machine],
+                                                               tmp_path: Path) -> None:
+    poses = tmp_path / "poses.csv"
+    code, _stdout, stderr = run("calibrate", "--plan", "40", "-o", str(poses), "--tools", "60,100")
+    assert code == 0, stderr
+    table = np.genfromtxt(poses, delimiter=",", names=True)
+    assert len(table) == 40 and set(np.unique(table["tool_length"])) == {60.0, 100.0}
+    joints = np.column_stack([table["rho1"], table["rho2"], table["rho3"], np.radians(table["theta1"]),
+                              np.radians(table["theta2"])])
+    # every planned pose passes the machine's checks at the nominal geometry (api, not the planner)
+    fk = vp.forward_kinematics(machine, joints, tool_length=table["tool_length"])
+    found = pose_margins(machine, joints, fk.platform, fk.alpha, fk.reachable, table["tool_length"])
+    assert np.all(classify(machine, joints, fk.reachable, found) == Status.OK)
+    np.testing.assert_allclose(np.column_stack([table["x_nominal"], table["y_nominal"], table["z_nominal"]]),
+                               fk.tip, atol=1e-3)
+    # measured on the assembled machine, these 40 poses calibrate it
+    tip = vp.forward_kinematics(assembled[1], joints, tool_length=table["tool_length"]).tip
+    tip += np.random.default_rng(71).normal(0.0, NOISE, tip.shape)
+    measured = write_csv(tmp_path / "planned.csv", joints, table["tool_length"], tip)
+    code, _, stderr = run("calibrate", str(measured), "-o", str(tmp_path / "p.yaml"))
+    assert code == 0, stderr
+    check_joints, _, check_tip = measure(assembled[1], machine, 30, seed=72, tools=(80.0,), noise=0.0)
+    calibrated = vp.load_machine(tmp_path / "p.yaml")
+    error = vp.forward_kinematics(calibrated, check_joints, tool_length=80.0).tip - check_tip
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 0.010
+    # and they determine the parameters better than 40 random usable poses do
+    p = parameters_of(machine)
+    free = [k for k, n in enumerate(PARAMETERS) if n != "da"]
+
+    def log_det(q: np.ndarray, tool: np.ndarray) -> float:
+        d_tip, _ = jacobian(p, q, tool, predict(p, q, tool))
+        j = d_tip[:, :, free].reshape(-1, len(free))
+        return float(np.linalg.slogdet(j.T @ j)[1])
+
+    random_joints = random_usable_joints(machine, 40, seed=73)
+    assert log_det(joints, table["tool_length"]) > log_det(random_joints, np.resize([60.0, 100.0], 40)) + 5.0
+
+
+def test_machine_file_refuses_a_bad_calibration_block(machine: vp.Machine) -> None:
+    data = machine.model_dump()
+    data["calibration"] = {"method": "x", "measurements": "m.csv", "poses": 3, "rms_before": 1.0, "max_before": 1.0,
+                           "rms_after": 0.1, "max_after": 0.1, "date": "2026-01-01"}
+    with pytest.raises(Exception, match="date"):
+        vp.Machine.model_validate(data)
+    data["joints"]["rho1"]["offset"] = 500.0
+    del data["calibration"]
+    with pytest.raises(Exception, match="offset"):
+        vp.Machine.model_validate(data)

@@ -180,11 +180,12 @@ def calibrate(p0: np.ndarray, poses: Poses, fix: tuple[str, ...] = (), reject: b
     unknown = [n for n in fix if n not in PARAMETERS]
     if unknown:
         raise UserError(f"--fix: unknown parameter '{unknown[0]}' (one of {', '.join(PARAMETERS)})")
-    status = {n: ("fixed" if n in fix else "fitted") for n in PARAMETERS}
-    reasons: dict[str, str] = {n: "fixed by --fix" for n in fix}
     used = np.ones(len(poses), bool)
     before_tip, _ = residuals(p0, poses)
     for _round in range(MAX_REJECT_ROUNDS + 1):
+        # What is held is decided afresh for each set of poses.
+        status = {n: ("fixed" if n in fix else "fitted") for n in PARAMETERS}
+        reasons: dict[str, str] = {n: "fixed by --fix" for n in fix}
         p, jac, sigma, free, evaluations, message = _fit_used(p0, poses, used, status, reasons, max_evaluations)
         after_tip, _ = residuals(p, poses)
         z = _robust_z(np.linalg.norm(after_tip, axis=1), used)
@@ -237,7 +238,13 @@ def _fit_used(p0: np.ndarray, poses: Poses, used: np.ndarray, status: dict[str, 
             raise FitError("the fit did not converge: at the best geometry found some measured poses have no working "
                            "assembly (the measurements do not fit this machine)")
         names = [PARAMETERS[k] for k in free]
-        relative, vt, table = directions(jac, names, sigma)
+        # The noise for this test without the poses that stand out: an outlier must not make
+        # well-determined parameters look weak.
+        tip_rows = found.fun[: 3 * len(subset)].reshape(-1, 3)
+        clean = _robust_z(np.linalg.norm(tip_rows, axis=1), np.ones(len(subset), bool)) <= OUTLIER_Z
+        clean_rows = 3 * int(clean.sum())
+        clean_sigma = float(np.sqrt(np.sum(tip_rows[clean] ** 2) / max(clean_rows - len(free), 1)))
+        relative, vt, table = directions(jac, names, clean_sigma)
         weak = [k for k, d in enumerate(table) if not d.std <= WEAK_STD]
         if not weak:
             return p, jac, sigma, free, found.nfev, str(found.message)
