@@ -290,9 +290,18 @@ def test_calibrated_file_keeps_the_input_and_posts(machine: vp.Machine, calibrat
     out = calibrated[0]
     original_text = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
     text = out.read_text()
-    for line in original_text.splitlines():  # every comment survives
-        if "#" in line:
-            assert line[line.index("#"):] in text
+    # Byte for byte the input, but for the lines of fitted values (geometry keys other than da,
+    # the five joint lines) and the calibration block appended at the end.
+    original_lines, lines = original_text.splitlines(), text.splitlines()
+    assert len(lines) > len(original_lines)
+    changed_lines = [k for k, (a, b) in enumerate(zip(original_lines, lines, strict=False)) if a != b]
+    keys = [original_lines[k].split(":")[0].strip() for k in changed_lines]
+    assert sorted(keys) == sorted([*(set(PARAMETERS[:12]) - {"da"}), "rho1", "rho2", "rho3", "theta1", "theta2"])
+    for k in changed_lines:  # the value changed, the comment and the alignment did not
+        before_line, after_line = original_lines[k], lines[k]
+        assert before_line.partition("#")[2] == after_line.partition("#")[2]
+        assert before_line[: before_line.index(":") + 1] == after_line[: after_line.index(":") + 1]
+    assert lines[len(original_lines) + 1].startswith("# Written by 'verne-post calibrate'")
     before, after = yaml.safe_load(original_text), yaml.safe_load(text)
     block = after.pop("calibration")
     assert block["poses"] == 80 and block["rejected"] == 0 and block["held"] == ["da"]
@@ -314,6 +323,28 @@ def test_calibrated_file_keeps_the_input_and_posts(machine: vp.Machine, calibrat
     code, _, stderr = run("post", str(SAMPLE_CL), "-o", str(tmp_path / "nominal.nc"), "-q")
     assert code == 0, stderr
     assert (tmp_path / "cal.nc").read_bytes() != (tmp_path / "nominal.nc").read_bytes()
+
+
+def test_block_style_joints_and_a_second_calibration(measured: Path, tmp_path: Path) -> None:
+    """A joint written as a block mapping gets its offset too (through the round-trip dump, which
+    keeps the comments); calibrating a calibrated file replaces its block, not appends one."""
+    original = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
+    flow = "  rho1:   {min: 0.0, max: 1300.0, velocity: 1000.0, acceleration: 10000.0, jerk: 200000.0}\n"
+    assert flow in original
+    source = tmp_path / "block.yaml"
+    source.write_text(original.replace(flow, "  rho1:\n    min: 0.0\n    max: 1300.0   # travel of slider 1\n"
+                                              "    velocity: 1000.0\n    acceleration: 10000.0\n    jerk: 200000.0\n"))
+    first, second = tmp_path / "first.yaml", tmp_path / "second.yaml"
+    assert run("calibrate", str(measured), "--machine", str(source), "-o", str(first))[0] == 0
+    text = first.read_text()
+    assert "# travel of slider 1" in text and "# ASSUMPTION: margins below which" in text
+    machine = vp.load_machine(first)
+    assert machine.joints.rho1.offset != 0.0 and machine.calibration is not None
+    assert run("calibrate", str(measured), "--machine", str(first), "-o", str(second))[0] == 0
+    again = second.read_text()
+    assert again.count("calibration:") == 1 and again.count("# Written by 'verne-post calibrate'") == 1
+    recalibrated = vp.load_machine(second).calibration
+    assert recalibrated is not None and recalibrated.rms_before < 0.008  # it starts from the calibrated file
 
 
 def test_fix_holds_a_parameter(measured: Path, tmp_path: Path) -> None:
