@@ -190,6 +190,7 @@ def main() -> None:
     verne-post workspace -o ws.png        map of the tool-tip workspace for a tool axis
     verne-post toolpath part.cls          the toolpath as the reader understood it (CSV)
     verne-post ik / fk ...                kinematics of single poses or CSV files
+    verne-post calibrate meas.csv -o my.yaml   identify geometry and joint zeros from measured tips
     """
 
 

@@ -55,7 +55,7 @@ def read_measurements(path: str | os.PathLike[str], machine: Machine) -> Measure
     has = {c: c in columns for c in ("i", "j", "k")}
     if any(has.values()) and not all(has.values()):
         raise InputError("columns i, j, k come together (a measured tool axis) or not at all", source,
-                         int(lines[0]) - 1 if n else None)
+                         _header_line(path))
     axis = (np.column_stack([columns["i"], columns["j"], columns["k"]]) if all(has.values())
             else np.full((n, 3), np.nan))
     weight = columns.get("weight", np.ones(n))
@@ -115,6 +115,18 @@ def check_pose_count(measurements: Measurements, free: int) -> None:
         need = math.floor(free / 3) + 1
         raise InputError(f"{len(poses)} poses for {free} free parameters: at least {need} poses are needed (and "
                          "many more for a useful fit, e.g. 80)", measurements.source, int(measurements.lines[-1]))
+
+
+def _header_line(path: str | os.PathLike[str]) -> int | None:
+    """1-based line of the header: the first line that is neither blank nor a # comment."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as handle:
+            for number, line in enumerate(handle, 1):
+                if line.strip() and not line.lstrip().startswith("#"):
+                    return number
+    except OSError:
+        pass
+    return None
 
 
 def _last_line(path: str | os.PathLike[str]) -> int | None:
