@@ -467,3 +467,35 @@ def test_machine_file_refuses_a_bad_calibration_block(machine: vp.Machine) -> No
     del data["calibration"]
     with pytest.raises(Exception, match="offset"):
         vp.Machine.model_validate(data)
+
+
+def test_measured_axes_and_weights(machine: vp.Machine, assembled: tuple[np.ndarray, vp.Machine],
+                                   tmp_path: Path) -> None:
+    """Rows with a measured tool axis (i, j, k) and weights: table-angle zeros of a few
+    hundredths of a degree are recovered within their standard deviations."""
+    truth = assembled[0].copy()
+    theta_deg = (0.011, -0.017)
+    truth[15:17] = np.radians(theta_deg)
+    true_machine = _machine_of(machine, truth)
+    joints = random_usable_joints(machine, 60, seed=81)
+    tool = np.resize([60.0, 80.0, 100.0], 60)
+    fk = vp.forward_kinematics(true_machine, joints, tool_length=tool)
+    rng = np.random.default_rng(82)
+    tip = fk.tip + rng.normal(0.0, NOISE, (60, 3))
+    axis = fk.axis + rng.normal(0.0, 2e-5, (60, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    lines = [HEADER + ",i,j,k,weight"]
+    for k in range(60):
+        lines.append(",".join(f"{v:.8f}" for v in (*joints[k, :3], *np.degrees(joints[k, 3:]), tool[k], *tip[k],
+                                                     *axis[k], 2.0 if k % 2 else 1.0)))
+    path = tmp_path / "axes.csv"
+    path.write_text("\n".join(lines) + "\n")
+    code, _, stderr = run("calibrate", str(path), "-o", str(tmp_path / "c.yaml"), "--report", str(tmp_path / "r.json"))
+    assert code == 0, stderr
+    parameters = {p["name"]: p for p in json.loads((tmp_path / "r.json").read_text())["parameters"]}
+    for name, want in zip(("theta1_offset", "theta2_offset"), theta_deg, strict=True):
+        assert parameters[name]["status"] == "fitted"
+        assert abs(parameters[name]["fitted"] - want) < 4.0 * parameters[name]["std"]
+        assert parameters[name]["std"] < 0.001
+    calibrated = vp.load_machine(tmp_path / "c.yaml")
+    assert calibrated.joints.theta1.offset == pytest.approx(theta_deg[0], abs=0.001)
