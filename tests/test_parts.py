@@ -64,13 +64,13 @@ def test_parts_are_bounded_and_end_where_the_machine_stops(monkeypatch: pytest.M
     """No stage sees more poses than a part's window, and the cut passes of the impeller's blade
     flanks (no rapid between them) are split too: at poses that start a feed sequence."""
     solved: list[int] = []
-    real = pipeline._solve
+    real = pipeline.solve_poses
 
     def spy(machine: vp.Machine, poses: object, *args: object, **kwargs: object) -> object:
         solved.append(len(poses))
         return real(machine, poses, *args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "_solve", spy)
+    monkeypatch.setattr(pipeline, "solve_poses", spy)
     firsts: list[int] = []
     real_parts = pipeline._parts
 

@@ -15,10 +15,11 @@ from click.testing import CliRunner
 
 import verne_post as vp
 from verne_post.api import Status, classify, pose_margins
+from verne_post.checking import Checked, check_poses
 from verne_post.cl import read_toolpath
 from verne_post.cli import main
 from verne_post.headroom import headroom, smallest
-from verne_post.pipeline import Checked, PostOptions, check_poses
+from verne_post.options import PostOptions
 from verne_post.placement import place
 from verne_post.poses import machine_poses
 

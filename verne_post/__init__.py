@@ -8,8 +8,6 @@ Library entry points (mm, radians inside arrays; table frame for tool poses)::
     results = verne_post.batch(["parts/"], None, verne_post.BatchOptions(), output_dir="posted")
 """
 
-__version__ = "0.2.0"  # before the imports: modules below read it
-
 from .api import (
     FKResult,
     IKResult,
@@ -24,6 +22,7 @@ from .api import (
 from .batch import BatchOptions, BatchResult, batch
 from .kinematics import module_fk_all, module_fk_working, module_ik_all, module_ik_working
 from .machine import Geometry, Machine, load_machine
+from .version import __version__ as __version__  # re-exported: verne_post.__version__
 from .workspace import workspace
 
 __all__ = [

@@ -34,12 +34,12 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 
-from . import __version__
 from .allocator import keep_freed_memory
 from .atomic import atomic_write, check_writable
 from .errors import InputError, OutputError, UserError, one_line
 from .gcode import PREAMBLE, with_header_line
 from .machine import DEFAULT_MACHINE, load_machine
+from .version import __version__
 
 if TYPE_CHECKING:
     from .pipeline import PostOptions

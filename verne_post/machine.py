@@ -7,7 +7,6 @@ User-facing units are mm and degrees (YAML); :class:`Geometry` is what the kinem
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Annotated
@@ -17,6 +16,8 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .errors import InputError
+from .kinematics import reference_pose_problem
+from .kinematics.geometry import Geometry
 
 # Every number finite (YAML's .inf and .nan are refused), unknown keys refused.
 _STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
@@ -33,74 +34,6 @@ Finite = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
 Velocity = Annotated[float, Field(ge=1e-3, le=1e6)]
 Acceleration = Annotated[float, Field(ge=1e-3, le=1e8)]
 Jerk = Annotated[float, Field(ge=1e-3, le=1e10)]
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """Identified dimensions of the VERNE (mm), paper notation; ``delta`` = P to tool tip.
-
-    ``delta`` = ``spindle_nose`` + ``tool_length``. Only the differences D1-d1 and D2-d2 enter
-    the closure equations (paper eq. 3-5).
-
-    ``rho_offset`` (mm) and ``theta_offset`` (rad) are the joint zero offsets: the true joint
-    position is the controller's reading plus the offset. Every public kinematics function
-    takes and returns joint *readings*; the offsets are applied inside (all zero: the
-    readings are the true positions, and no arithmetic is done on them at all).
-    """
-
-    D1_minus_d1: float
-    D2_minus_d2: float
-    R1: float
-    r1: float
-    L1: float
-    R2: float
-    r4: float
-    L2: float
-    L3: float
-    spindle_nose: float
-    da: float
-    dt: float
-    tool_length: float = 0.0
-    rho_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    theta_offset: tuple[float, float] = (0.0, 0.0)
-
-    @property
-    def has_offsets(self) -> bool:
-        """True where any joint zero offset is non-zero."""
-        return any(self.rho_offset) or any(self.theta_offset)
-
-    def _offsets(self, width: int) -> np.ndarray:
-        return np.array((*self.rho_offset, *self.theta_offset)[:width], dtype=float)
-
-    def true_joints(self, joints: np.ndarray) -> np.ndarray:
-        """True joint positions from readings (N, 3) rho mm or (N, 5) rho mm, theta rad.
-
-        Returns ``joints`` itself when every offset is zero (outputs stay bit-identical).
-        """
-        if not self.has_offsets:
-            return joints
-        joints = np.asarray(joints, dtype=float)
-        return joints + self._offsets(joints.shape[-1])
-
-    def readings(self, joints: np.ndarray) -> np.ndarray:
-        """Controller readings from true joint positions, (N, 3) or (N, 5); inverse of :meth:`true_joints`."""
-        if not self.has_offsets:
-            return joints
-        joints = np.asarray(joints, dtype=float)
-        return joints - self._offsets(joints.shape[-1])
-
-    @property
-    def delta(self) -> float:
-        """Distance from the platform centre P to the tool tip U (mm)."""
-        return self.spindle_nose + self.tool_length
-
-    @property
-    def alpha_max(self) -> float:
-        """Largest |alpha| (rad) without rod crossing in leg I: R1 cos(alpha) > r1."""
-        return math.acos(self.r1 / self.R1)
-
-    def with_tool_length(self, tool_length: float) -> Geometry:
-        return replace(self, tool_length=float(tool_length))
 
 
 class GeometryConfig(BaseModel):
@@ -129,19 +62,10 @@ class GeometryConfig(BaseModel):
         """The reference pose (tool tip at the table origin, axis along the table normal, no
         tool: the spindle nose at the origin) must be reachable in the working mode; otherwise
         the numbers describe no working VERNE, whatever the joint limits."""
-        from .kinematics import machine_ik_all, machine_ik_working
-
-        geom = Geometry(**self.model_dump())
-        tip, axis = np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]])
-        if machine_ik_working(geom, tip, axis).reachable[0]:
-            return self
-        if len(machine_ik_all(geom, tip, axis).alpha) == 0:
-            why = "no assembly of the legs reaches it (rod lengths L1, L2, L3 against da, dt and spindle_nose)"
-        else:
-            why = "it is reached only outside the working mode (a slider below its platform point, or leg I rods " \
-                  "crossed)"
-        raise ValueError(f"the reference pose (spindle nose at the table origin, axis along the table normal) is not "
-                         f"reachable in the working mode: {why}")
+        problem = reference_pose_problem(Geometry(**self.model_dump()))
+        if problem is not None:
+            raise ValueError(problem)
+        return self
 
 
 #: Largest joint zero offset (mm for a slider, degrees for a rotary): a calibration corrects

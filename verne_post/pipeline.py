@@ -30,54 +30,40 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, Literal
+from typing import IO, Any, Literal
 
 import numpy as np
 
-from . import __version__
 from .api import JOINT_NAMES, joint_bounds
 from .atomic import atomic_write
-from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone, solve_path
+from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
+from .checking import (
+    Checked,
+    between_violations,
+    check_poses,
+    linearise_poses,
+    program_violations,
+    rapid_blocks,
+    safe_settings,
+    solve_poses,
+)
 from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
 from .errors import OutputError
 from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .helpers import Helper, VerifierProcess, available, outcome
-from .linearise import Blocks, linearise
+from .linearise import Blocks
 from .machine import Machine
+from .options import PostOptions
+from .placement import Placement, place
 from .poses import MachinePoses, machine_poses
-from .safe_motion import SafeSettings, between_cuts
+from .safe_motion import between_cuts
 from .schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .toolpath import Dwell, Event, ToolChange
 from .topp import Engine
 from .verify import Reference, Verification, Verifier, feed_top, verify_program
-
-if TYPE_CHECKING:
-    from .placement import Placement
-
-
-@dataclass(frozen=True)
-class PostOptions:
-    """User choices (mm and degrees, as on the command line)."""
-
-    # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.
-    work_offset: tuple[float, float, float] | Literal["auto"] | None = None
-    tool_length: float | None = None  # mm, for tools whose length nothing else gives
-    units: Literal["mm", "inch"] | None = None  # override the CL file's units
-    tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
-    axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
-    rapid_tol: float = 0.5  # mm: tool tip deviation from a CL rapid's straight line (never below it)
-    rapid_axis_tol: float = 0.5  # deg: tool axis deviation from a CL rapid's interpolated axis
-    arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
-    arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
-    frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
-    feed: float | None = None  # mm/min: the feed of feed moves before the CL file's first FEDRAT
-    plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
-    planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
-    optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
-    workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
-
+from .version import __version__
 
 _MARGINS = ("serial", "parallel", "machine", "rod_clearance")
 
@@ -260,80 +246,9 @@ def _tip_speed(feed: np.ndarray, inverse_time: np.ndarray, tip: np.ndarray, dura
     return np.where(inverse_time, inverse, feed / 60.0)
 
 
-@dataclass(frozen=True)
-class Checked:
-    """The program in joint space with everything the machine cannot do (stages 3 to 5)."""
-
-    path: PathIK
-    blocks: Blocks
-    rapid: np.ndarray  # (M,) per block
-    violations: tuple[Violation, ...]
-
-
-def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None, first_failure: bool = False) -> Checked:
-    """IK and branch, linearisation and every check of table-frame poses (no timing); violations
-    sorted by line. Placement calls this for each candidate work offset. With ``first_failure``
-    the linearisation stops once a block end fails: the violations then show that the program
-    fails, not every way it does (placement's room only asks whether it runs)."""
-    solved = _solve(machine, poses, options)
-    lap("ik")
-    blocks = _linearise(machine, poses, options, solved, until_failure=first_failure)
-    lap("linearise")
-    between = between_cuts(machine, poses, blocks, _safe_settings(machine, poses, options), before=None,
-                           end=len(poses))
-    blocks = between.blocks
-    rapid = _rapid(poses, blocks)
-    rapid[0] = True  # where the machine stands before the program is unknown: position with G0
-    checks, others = _checks(machine, poses, options, solved.pair_switch, blocks, rapid)
-    others += _between_violations(poses, between.problems)
-    return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
-
-
 def _rapid_speed(machine: Machine) -> float:
     """mm/s: the tip speed limit of rapids (the machine file's ``safe.rapid_feed``, else none)."""
     return NO_TIP_LIMIT if machine.safe.rapid_feed is None else machine.safe.rapid_feed / 60.0
-
-
-def _safe_settings(machine: Machine, poses: MachinePoses, options: PostOptions) -> SafeSettings:
-    return SafeSettings.of(machine, poses.tip, poses.rapid, rapid_tol=options.rapid_tol,
-                           rapid_axis_tol=np.radians(options.rapid_axis_tol), tol=options.tol,
-                           axis_tol=np.radians(options.axis_tol))
-
-
-def _rapid(poses: MachinePoses, blocks: Blocks) -> np.ndarray:
-    """Per block: a move between cuts (a CL rapid's, or one the safe-motion stage made)."""
-    return poses.rapid[blocks.pose] | blocks.between
-
-
-def _between_violations(poses: MachinePoses, problems: tuple[tuple[int, str], ...]) -> list[Violation]:
-    return [Violation(int(poses.line[pose]), "rapid", reason) for pose, reason in problems]
-
-
-def _solve(machine: Machine, poses: MachinePoses, options: PostOptions, state: BranchState | None = None,
-           pairs: Pairs | None = None) -> PathIK:
-    return solve_path(machine, poses.tip, poses.axis, poses.sequence, tool_length=poses.tool_length,
-                      cone=np.radians(machine.pole.cone), state=state, pairs=pairs)
-
-
-def _linearise(machine: Machine, poses: MachinePoses, options: PostOptions, solved: PathIK,
-               until_failure: bool = False) -> Blocks:
-    return linearise(machine, poses, solved, tol=options.tol, axis_tol=np.radians(options.axis_tol),
-                     cone=np.radians(machine.pole.cone), until_failure=until_failure)
-
-
-def _checks(machine: Machine, poses: MachinePoses, options: PostOptions, switch: np.ndarray, blocks: Blocks,
-            rapid: np.ndarray, first: int = 0) -> tuple[list[Violation], list[Violation]]:
-    """The violations of blocks (poses indexing ``poses``) and of the angle pair switches of poses
-    ``first``...: those of the checks (one per line and kind) and the others."""
-    checks = check_program(machine, blocks.result, rapid, poses.tool_length[blocks.pose], poses.line[blocks.pose])
-    others = [Violation(int(poses.line[k]), "path", f"the move cannot be kept within {options.tol} mm / "
-                                                    f"{options.axis_tol} deg of the CL path")
-              for k in blocks.unresolved]
-    others += [Violation(int(poses.line[first + k]), "branch", "no single tool-axis angle pair reaches this whole "
-                                                               "cut: the table would turn half a turn mid-cut")
-               for k in np.flatnonzero(switch)]
-    return checks, others
 
 
 #: Violations gathered over the parts at most (the checks of one part report at most 10,000
@@ -495,16 +410,16 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
     state = BranchState()
     last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
     before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
-    safe = _safe_settings(machine, poses, options)
+    safe = safe_settings(machine, poses, options)
     first = 0
     while first < n:
         end = min(n, first + size)
         while True:
-            solved = _solve(machine, poses.part(first, end), options, state,
+            solved = solve_poses(machine, poses.part(first, end), options, state,
                             None if pairs is None else pairs.part(first, end))
             lap("ik")
             context = int(last is not None and not poses.rapid[first])  # a feed move from the part before
-            blocks = _linearise(machine, poses.part(first - context, end), options,
+            blocks = linearise_poses(machine, poses.part(first - context, end), options,
                                 last.then(solved) if context else solved).shifted(first - context)
             blocks = blocks.rows(slice(np.searchsorted(blocks.pose, first), None))
             lap("linearise")
@@ -523,10 +438,10 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         path = solved.rows(slice(0, cut - first))
         between = between_cuts(machine, poses, blocks, safe, before=None if before is None else before[0], end=cut)
         blocks = between.blocks
-        rapid = _rapid(poses, blocks)
+        rapid = rapid_blocks(poses, blocks)
         rapid[0] |= first == 0  # where the machine stands before the program is unknown: position with G0
-        checks, others = _checks(machine, poses, options, path.pair_switch, blocks, rapid, first)
-        others += _between_violations(poses, between.problems)
+        checks, others = program_violations(machine, poses, options, path.pair_switch, blocks, rapid, first)
+        others += between_violations(poses, between.problems)
         context = 0
         if before is not None:  # the move into this part, from the last block of the part before
             blocks, rapid, context = before[0].then(blocks), np.r_[before[1], rapid], 1
@@ -612,8 +527,6 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
     clock.lap("parse")
     placement = None
     if options.work_offset == "auto":
-        from .placement import place
-
         zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length)
         placement = place(machine, zero, options, progress=clock.progress)
         options = replace(options, work_offset=placement.offset)

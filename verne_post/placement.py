@@ -32,11 +32,12 @@ import numpy as np
 
 from .api import Status, classify, joint_bounds, pose_margins
 from .branch import solve_path
+from .checking import Checked, check_poses
 from .checks import motion_samples
 from .headroom import UNREACHABLE, describe, headroom, smallest
 from .kinematics import machine_ik_working, margins, module_ik_working
 from .machine import Machine
-from .pipeline import Checked, PostOptions, check_poses
+from .options import PostOptions
 from .poses import MachinePoses
 
 AXES = "xyz"
@@ -303,7 +304,7 @@ def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: 
 
 def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> np.ndarray | None:
     """The room's full check at ``offset`` (mm): None where the program runs, else the CL poses
-    to screen next. It stops at the first failure (see :func:`verne_post.pipeline.check_poses`)."""
+    to screen next. It stops at the first failure (see :func:`verne_post.checking.check_poses`)."""
     shifted = replace(poses, tip=poses.tip + offset)
     checked = check_poses(machine, shifted, options, first_failure=True)
     return _verdict(machine, poses, shifted, checked).worst if checked.violations else None

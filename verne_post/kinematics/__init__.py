@@ -1,6 +1,7 @@
 """Pure kinematics of the VERNE: closed-form IK/FK of the parallel module and the whole machine.
 
-No I/O here: functions over numpy arrays of a :class:`~verne_post.machine.Geometry`.
+No I/O here: functions over numpy arrays of a :class:`~verne_post.kinematics.geometry.Geometry`,
+the one record of verne_post they import (they import nothing else of it).
 """
 
 from .full import (
@@ -18,6 +19,7 @@ from .full import (
     unwrap_near,
     wrap_angle,
 )
+from .geometry import Geometry
 from .jacobian import Margins, joint_rates, machine_jacobian, margins, module_jacobian, singularity_measures
 from .module import (
     ModuleFK,
@@ -33,8 +35,10 @@ from .module import (
     module_ik_all,
     module_ik_working,
 )
+from .reference import reference_pose_problem
 
 __all__ = [
+    "Geometry",
     "MachineFK",
     "MachineFKSolutions",
     "MachineIK",
@@ -62,6 +66,7 @@ __all__ = [
     "module_ik_all",
     "module_ik_working",
     "module_jacobian",
+    "reference_pose_problem",
     "singularity_measures",
     "tool_pose",
     "unwrap_near",

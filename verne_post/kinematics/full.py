@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..machine import Geometry
+from .geometry import Geometry
 from .module import (
     _module_fk_all,
     _module_fk_working,

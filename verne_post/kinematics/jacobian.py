@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..machine import Geometry
+from .geometry import Geometry
 
 
 def _rod_vectors(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray

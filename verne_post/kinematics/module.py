@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..machine import Geometry
+from .geometry import Geometry
 from .trigpoly import TrigPoly, real_half_angle_roots
 
 #: Relative tolerance on the closure equations (eq. 2) for accepting a root, times L^2.

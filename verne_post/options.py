@@ -1,0 +1,35 @@
+"""What the user chose for one post (mm and degrees, as on the command line).
+
+Its own module because every stage that takes the choices (placement, the checks, the report)
+would otherwise import the pipeline that calls it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Literal
+
+from .topp import Engine
+
+
+@dataclass(frozen=True)
+class PostOptions:
+    """User choices (mm and degrees, as on the command line)."""
+
+    # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.
+    work_offset: tuple[float, float, float] | Literal["auto"] | None = None
+    tool_length: float | None = None  # mm, for tools whose length nothing else gives
+    units: Literal["mm", "inch"] | None = None  # override the CL file's units
+    tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks
+    axis_tol: float = 0.05  # deg: tool axis deviation from the CL path between blocks
+    rapid_tol: float = 0.5  # mm: tool tip deviation from a CL rapid's straight line (never below it)
+    rapid_axis_tol: float = 0.5  # deg: tool axis deviation from a CL rapid's interpolated axis
+    arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
+    arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
+    frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
+    feed: float | None = None  # mm/min: the feed of feed moves before the CL file's first FEDRAT
+    plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
+    planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
+    optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
