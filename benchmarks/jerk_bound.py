@@ -9,7 +9,7 @@ second. A sequence starts and ends at rest with zero acceleration (its jerk is b
 acceleration is continuous, and the machine stood still before it). Per sequence the bound is
 the largest of three:
 
-- LB (:func:`verne_post.timing.lower_bound_time`): per block, each joint's displacement at its
+- LB (:func:`verne_post.planning.timing.lower_bound_time`): per block, each joint's displacement at its
   velocity limit, the tip's chord at the block's feed; no acceleration at all.
 - Rest to rest: each joint makes its net displacement ``|q_j(end) - q_j(0)|`` from rest to rest
   within its velocity, acceleration and jerk limits, which takes at least the time of the
@@ -39,7 +39,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from verne_post.timing import TIP_EPS, Limits, block_min_time, checked_sequence, rest_to_rest
+from verne_post.planning.timing import TIP_EPS, Limits, block_min_time, checked_sequence, rest_to_rest
 
 __all__ = ["jerk_lower_bounds", "rest_to_rest_time", "time_from_rest"]
 
@@ -69,7 +69,7 @@ def time_from_rest(distance: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.nda
 def rest_to_rest_time(distance: np.ndarray, v: np.ndarray, a: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Time (s) of the time-optimal move over ``distance`` from rest to rest with speed,
     acceleration and jerk at most v, a, j (one axis): the 7-segment S-curve
-    (:func:`verne_post.timing.rest_to_rest`), broadcast."""
+    (:func:`verne_post.planning.timing.rest_to_rest`), broadcast."""
     return rest_to_rest(*np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (distance, v, a, j)))).total
 
 
@@ -125,7 +125,7 @@ def jerk_lower_bounds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarr
     """Per sequence ``(joints (K + 1, 5) mm/rad, tip (K + 1, 3) mm, feed (K,) mm/s)``, a lower
     bound (s) on the time of any plan within the joint velocity, acceleration and jerk limits and
     the feeds, from rest to rest (module docstring); ``angular_feed`` (rad/s) caps rotary-only
-    blocks as in :func:`verne_post.timing.lower_bound_time`."""
+    blocks as in :func:`verne_post.planning.timing.lower_bound_time`."""
     checked = [checked_sequence(*sequence) for sequence in sequences]
     count = len(checked)
     sizes = np.array([len(feed) for _, _, feed in checked])

@@ -37,7 +37,8 @@ ROOT = Path(__file__).resolve().parent.parent
 _WHOLE = """
 import sys
 import verne_post as vp
-from verne_post.pipeline import PostOptions, postprocess, write_output
+from verne_post.options import PostOptions
+from verne_post.pipeline import postprocess, write_output
 machine = vp.load_machine()
 options = PostOptions()
 result = postprocess(sys.argv[1], machine, options)

@@ -9,7 +9,7 @@ in turn (A B C A B C ..., so a drift of the machine's speed hits all three alike
   (a) ``verne-post job.cls -o job.nc -q``: every stage, planning and verification included
       (planning and verification in helper processes beside the main one, on 2+ cores);
   (b) the same with ``--report job.json``;
-  (c) LinuxCNC's ``rs274 -g`` alone reading the job.nc that (a) wrote, as verne_post.rs274 runs it;
+  (c) LinuxCNC's ``rs274 -g`` alone reading the job.nc that (a) wrote, as verne_post.verify.rs274 runs it;
   (d) (a) with ``--workers 1``: every stage in one process, the baseline of the helpers.
 
 Prints their seconds and the ratios (a)/(c) (target <= 4), (b)/(a) (target <= 1.10) and
@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from verne_post.rs274 import INSTALL_HINT, _environment, _write_tool_table, find_rs274
+from verne_post.verify.rs274 import INSTALL_HINT, _environment, _write_tool_table, find_rs274
 
 ROOT = Path(__file__).resolve().parent.parent
 

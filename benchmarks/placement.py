@@ -25,12 +25,12 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import verne_post as vp  # noqa: E402
-from verne_post import placement  # noqa: E402
-from verne_post.checking import Checked  # noqa: E402
+from verne_post.checks.stage import Checked  # noqa: E402
 from verne_post.cl import read_toolpath  # noqa: E402
+from verne_post.motion.poses import machine_poses  # noqa: E402
 from verne_post.options import PostOptions  # noqa: E402
 from verne_post.pipeline import postprocess  # noqa: E402
-from verne_post.poses import machine_poses  # noqa: E402
+from verne_post.placement import search as placement  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -1,6 +1,6 @@
 """A jerk-limited look-ahead baseline: per-block S-curve feed, as controllers with S-curve planning run G-code.
 
-The block model is :func:`verne_post.timing.baseline_time`'s (the trapezoidal baseline), kept here
+The block model is :func:`verne_post.planning.timing.baseline_time`'s (the trapezoidal baseline), kept here
 on its own so the baseline does not move with the planner: per block a speed (the feed, clamped
 so that no joint exceeds its velocity limit, the joints moving proportionally along the block),
 a tangential acceleration and jerk (what the dominating joint allows); at a junction at most the
@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from verne_post.timing import TIP_EPS, Limits
+from verne_post.planning.timing import TIP_EPS, Limits
 
 __all__ = ["ramp_distance", "ramp_time", "scurve_baseline_time"]
 
@@ -67,7 +67,7 @@ def scurve_baseline_time(joints: np.ndarray, tip: np.ndarray, feed: np.ndarray, 
                          angular_feed: float | None = None, cycle: float = 0.002) -> float:
     """Time (s) of the sequence under jerk-limited look-ahead S-curve planning (module docstring).
 
-    Same inputs as :func:`verne_post.timing.baseline_time`: joints (K + 1, 5) mm/rad, tips (K + 1, 3)
+    Same inputs as :func:`verne_post.planning.timing.baseline_time`: joints (K + 1, 5) mm/rad, tips (K + 1, 3)
     mm, feed (K,) mm/s per block, ``angular_feed`` rad/s for rotary-only blocks, ``cycle`` s.
     """
     joints = np.asarray(joints, dtype=float)

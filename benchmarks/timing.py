@@ -18,7 +18,7 @@ second-order optimum. Rapids are the same ruckig moves in all of them and are le
 a random sample of the feed sequences, copp-py's TOPP3-LP (benchmarks/topp3.py): what a
 third-order method gets from the jerk limits, T3 / T2, beside the plan's T / T0 on the same
 sample. The row ``copp+LP`` is ``--optimize``: the default engine plus the third-order programme
-(verne_post.third_order) on the sequences of more than 40 blocks.
+(verne_post.planning.third_order) on the sequences of more than 40 blocks.
 """
 
 from __future__ import annotations
@@ -42,11 +42,12 @@ from benchmarks.jerk_bound import jerk_lower_bounds  # noqa: E402
 from benchmarks.pipeline import _generator  # noqa: E402
 from benchmarks.scurve import scurve_baseline_time  # noqa: E402
 from benchmarks.topp3 import topp3_reference  # noqa: E402
-from verne_post import feed_planner  # noqa: E402
-from verne_post.linearise import Blocks  # noqa: E402
-from verne_post.pipeline import PostOptions, feed_speed, postprocess  # noqa: E402
-from verne_post.schedule import Schedule, Segment, plan_program  # noqa: E402
-from verne_post.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
+from verne_post.motion.linearise import Blocks  # noqa: E402
+from verne_post.options import PostOptions  # noqa: E402
+from verne_post.pipeline import feed_speed, postprocess  # noqa: E402
+from verne_post.planning import feed_planner  # noqa: E402
+from verne_post.planning.schedule import Schedule, Segment, plan_program  # noqa: E402
+from verne_post.planning.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
 
 def measure(points: int, engines: tuple[str, ...], sample: int) -> None:

@@ -22,8 +22,8 @@ import numpy as np  # noqa: E402
 
 import verne_post as vp  # noqa: E402
 from tests.paths import helix, zigzag  # noqa: E402
-from verne_post.feed_planner import plan_feed  # noqa: E402
-from verne_post.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
+from verne_post.planning.feed_planner import plan_feed  # noqa: E402
+from verne_post.planning.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
 
 def main() -> None:

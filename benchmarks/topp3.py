@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from verne_post.timing import TIP_EPS, Limits
+from verne_post.planning.timing import TIP_EPS, Limits
 
 STATIONS_PER_SECOND = 500
 MIN_STATIONS = 200

@@ -1,11 +1,11 @@
-"""The command line's allocator settings (verne_post.allocator)."""
+"""The command line's allocator settings (verne_post.processes.allocator)."""
 
 from __future__ import annotations
 
 import platform
 import sys
 
-from verne_post.allocator import keep_freed_memory
+from verne_post.processes.allocator import keep_freed_memory
 
 
 def test_glibc_takes_both_settings_and_others_are_left_alone() -> None:

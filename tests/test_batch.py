@@ -35,7 +35,7 @@ from verne_post.batch import (
     recorded_hash,
 )
 from verne_post.cli import main
-from verne_post.pipeline import PostOptions
+from verne_post.options import PostOptions
 
 ROOT = Path(__file__).parent.parent
 SWARF = ROOT / "examples" / "nx_swarf_inch_crlf.cls"
@@ -328,7 +328,7 @@ def test_without_dask_the_scheduler_option_says_how_to_install_it(tmp_path: Path
 
 
 def test_the_local_dask_cluster_of_the_command_keeps_freed_memory() -> None:
-    """``--scheduler dask`` starts its workers with verne_post.allocator preloaded: malloc keeps
+    """``--scheduler dask`` starts its workers with verne_post.processes.allocator preloaded: malloc keeps
     freed memory there as in the local processes (a worker's task thread gave it back at once:
     twice the time per file)."""
     import platform
@@ -337,7 +337,7 @@ def test_the_local_dask_cluster_of_the_command_keeps_freed_memory() -> None:
 
     glibc = sys.platform.startswith("linux") and platform.libc_ver()[0] == "glibc"
     with dask_client("dask", 1) as client:
-        kept = client.run(lambda: importlib.import_module("verne_post.allocator").kept)
+        kept = client.run(lambda: importlib.import_module("verne_post.processes.allocator").kept)
     assert list(kept.values()) == [glibc]
 
 

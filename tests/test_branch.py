@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 import verne_post as vp
-from verne_post.branch import solve_path
 from verne_post.machine import JointLimits
+from verne_post.motion.branch import solve_path
 
 
 def _cone_path(n: int, tilt_deg: float, turns: float) -> tuple[np.ndarray, np.ndarray]:

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from verne_post.cl import read_cl, read_pose_csv, read_toolpath
+from verne_post.cl.toolpath import Comment, Coolant, Spindle, Stop, ToolChange, Toolpath
 from verne_post.errors import InputError
-from verne_post.toolpath import Comment, Coolant, Spindle, Stop, ToolChange, Toolpath
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from verne_post.cl import read_cl
+from verne_post.cl.toolpath import MOTION_KINDS, Coolant, Dwell, ToolChange, Toolpath
 from verne_post.errors import InputError
-from verne_post.toolpath import MOTION_KINDS, Coolant, Dwell, ToolChange, Toolpath
 
 SAMPLES = Path(__file__).resolve().parent / "data" / "cl-samples"
 NX_ZLEVEL = SAMPLES / "nx_zlevel_coremill_mm.cls"
@@ -754,7 +754,7 @@ def test_catia_pp_words_in_a_small_file(tmp_path: Path) -> None:
 
 
 def test_a_malformed_spindle_record_replaced_before_any_motion_is_a_warning(tmp_path: Path) -> None:
-    from verne_post.toolpath import Spindle
+    from verne_post.cl.toolpath import Spindle
 
     text = CATIA_HEAD + "SPINDL/900CCLW\nSPINDL/10000,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\n"
     tp = read(tmp_path, text)

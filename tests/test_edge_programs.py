@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from verne_post.cli import main
-from verne_post.rs274 import run_rs274
+from verne_post.verify.rs274 import run_rs274
 
 HEADER = "UNITS/MM\nMULTAX/ON\nTLDATA/MILL,10,0,80,0,0\nLOAD/TOOL,1\nFEDRAT/MMPM,1000\n"
 PROGRAMS = {

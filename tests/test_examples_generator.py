@@ -11,7 +11,7 @@ import pytest
 
 import verne_post as vp
 from verne_post.cl import read_cl
-from verne_post.toolpath import Comment, Coolant, Spindle, ToolChange, Toolpath
+from verne_post.cl.toolpath import Comment, Coolant, Spindle, ToolChange, Toolpath
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPT = ROOT / "examples" / "generate_job.py"

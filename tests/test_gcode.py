@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import verne_post.gcode as gcode
+import verne_post.output.gcode as gcode
+from verne_post.cl.toolpath import Comment, Coolant, Spindle, Stop, ToolChange
 from verne_post.errors import CheckError, OutputError
-from verne_post.gcode import (
+from verne_post.output.gcode import (
     MAX_COMMENT_CHARS,
     FeedRateError,
     GcodeFormat,
@@ -24,7 +25,7 @@ from verne_post.gcode import (
     format_program,
     write_program,
 )
-from verne_post.rs274 import (
+from verne_post.verify.rs274 import (
     FEED_INVERSE_TIME,
     INSTALL_HINT,
     Rs274Error,
@@ -33,7 +34,6 @@ from verne_post.rs274 import (
     inverse_time_rate,
     run_rs274,
 )
-from verne_post.toolpath import Comment, Coolant, Spindle, Stop, ToolChange
 
 LINE_LIMIT = 252  # LinuxCNC: "Command too long" above this many characters
 TOOLS = {1: (120.0, 0.5), 12: (85.25, -1.125), 5: (60.0, 0.0)}

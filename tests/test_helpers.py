@@ -19,10 +19,12 @@ from scipy.interpolate import PPoly
 import verne_post as vp
 import verne_post.pipeline as pipeline
 from verne_post.errors import HelperError
-from verne_post.feed_planner import Cubics
-from verne_post.pipeline import PostOptions, post
-from verne_post.schedule import SequenceError
-from verne_post.timing import Limits, plan_rapid
+from verne_post.options import PostOptions
+from verne_post.pipeline import post
+from verne_post.planning.feed_planner import Cubics
+from verne_post.planning.schedule import SequenceError
+from verne_post.planning.timing import Limits, plan_rapid
+from verne_post.verify.verifier import Verifier
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 
@@ -94,7 +96,7 @@ def test_an_error_in_a_helper_reaches_the_caller(tmp_path: Path, monkeypatch: py
     def broken(*args: object, **kwargs: object) -> object:
         raise RuntimeError("broken verifier")
 
-    monkeypatch.setattr(vp.verify.Verifier, "read", broken)
+    monkeypatch.setattr(Verifier, "read", broken)
     with pytest.raises(RuntimeError, match="broken verifier"):
         post(EXAMPLES / "nx_swarf_inch_crlf.cls", vp.load_machine(), PostOptions(workers=2), tmp_path / "x.nc",
              part_poses=50)
@@ -106,7 +108,7 @@ def test_a_helper_that_dies_is_one_error_and_writes_nothing(tmp_path: Path, monk
                                                             which: str) -> None:
     """A helper killed mid-run (the OOM killer, say): a one-line HelperError (exit 1), no file."""
     parent = os.getpid()
-    real_plan, real_read = pipeline.plan_program, vp.verify.Verifier.read
+    real_plan, real_read = pipeline.plan_program, Verifier.read
 
     def die_in_child(real: Callable[..., object]) -> Callable[..., object]:
         def dying(*args: object, **kwargs: object) -> object:
@@ -118,7 +120,7 @@ def test_a_helper_that_dies_is_one_error_and_writes_nothing(tmp_path: Path, monk
     if which == "planning":
         monkeypatch.setattr(pipeline, "plan_program", die_in_child(real_plan))
     else:
-        monkeypatch.setattr(vp.verify.Verifier, "read", die_in_child(real_read))
+        monkeypatch.setattr(Verifier, "read", die_in_child(real_read))
     target = tmp_path / "x.nc"
     with pytest.raises(HelperError, match="helper process stopped") as caught:
         post(EXAMPLES / "nx_swarf_inch_crlf.cls", vp.load_machine(), PostOptions(workers=2), target, part_poses=50)

@@ -11,8 +11,8 @@ import verne_post as vp
 from benchmarks.jerk_bound import jerk_lower_bounds, rest_to_rest_time, time_from_rest
 from tests.paths import helix, zigzag
 from tests.reference import ruckig_time
-from verne_post.feed_planner import plan_feeds
-from verne_post.timing import Limits, lower_bound_time
+from verne_post.planning.feed_planner import plan_feeds
+from verne_post.planning.timing import Limits, lower_bound_time
 
 
 def test_rest_to_rest_time_is_ruckigs_time_optimal_move() -> None:

@@ -87,6 +87,7 @@ def test_the_reader_sees_imports() -> None:
     graph = _graph()
     assert "verne_post.machine" in graph["verne_post.pipeline"]
     assert "verne_post.kinematics.geometry" in graph["verne_post.kinematics.full"]
+    assert "verne_post.checks.stage" in graph["verne_post.placement.search"]
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
@@ -101,3 +102,7 @@ def test_the_kinematics_import_nothing_else_of_the_package() -> None:
         if name.startswith("verne_post.kinematics"):
             assert all(other.startswith("verne_post.kinematics") for other in imported), (name, imported)
 
+
+
+def test_at_most_ten_modules_at_the_top() -> None:
+    assert len(list(PACKAGE.glob("*.py"))) <= 10

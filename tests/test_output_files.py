@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from verne_post import atomic
-from verne_post.atomic import atomic_write
 from verne_post.errors import OutputError
+from verne_post.output import atomic
+from verne_post.output.atomic import atomic_write
 
 ROOT = Path(__file__).parent.parent
 PART = ROOT / "tests" / "data" / "nx_multi_op_mm.cls"
@@ -151,7 +151,7 @@ def test_output_may_not_be_the_input(tmp_path: Path) -> None:
 # A process that writes part of an output and waits to be killed.
 _WRITER = textwrap.dedent("""
     import sys, time
-    from verne_post import atomic
+    from verne_post.output import atomic
     atomic.use_tmpfile = sys.argv[2] == "1"
     with atomic.atomic_write(sys.argv[1]) as handle:
         handle.write("partial\\n" * 10000)
@@ -210,7 +210,8 @@ def _writing(pid: int, folder: Path) -> bool:
 def test_cli_killed_while_writing_leaves_no_file(tmp_path: Path, use_tmpfile: bool) -> None:
     """SIGTERM to verne-post while it writes a large timed CSV: nothing but the input remains."""
     (tmp_path / "part.cls").write_bytes(PART.read_bytes())
-    code = f"from verne_post import atomic, cli; atomic.use_tmpfile = {use_tmpfile}; cli.main()"
+    code = (f"from verne_post import cli; from verne_post.output import atomic; atomic.use_tmpfile = {use_tmpfile}; "
+            "cli.main()")
     process = subprocess.Popen([sys.executable, "-c", code, "part.cls", "-o", "part.csv", "--period", "0.0001",
                                 "--tool-length", "50", "--quiet"], cwd=tmp_path.resolve())
     while not _writing(process.pid, tmp_path.resolve()) and process.poll() is None:

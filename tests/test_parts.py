@@ -20,11 +20,12 @@ import pytest
 
 import verne_post as vp
 import verne_post.pipeline as pipeline
-from verne_post.branch import _unwrap
 from verne_post.cl import lexer
-from verne_post.gcode_reader import read_gcode
-from verne_post.pipeline import PostOptions, post, postprocess, write_output
-from verne_post.verify import Verifier, verify_program
+from verne_post.motion.branch import _unwrap
+from verne_post.options import PostOptions
+from verne_post.pipeline import post, postprocess, write_output
+from verne_post.verify.gcode_reader import read_gcode
+from verne_post.verify.verifier import Verifier, verify_program
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 NUMBERED = "block_numbers: true"

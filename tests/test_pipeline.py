@@ -18,8 +18,8 @@ from click.testing import CliRunner
 import verne_post as vp
 from verne_post.cl import read_toolpath
 from verne_post.cli import main
-from verne_post.linearise import angle_to_arc, distance_to_segment
-from verne_post.rs274 import run_rs274
+from verne_post.motion.linearise import angle_to_arc, distance_to_segment
+from verne_post.verify.rs274 import run_rs274
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 # (file, work offset X Y Z mm): the README gives the same offsets.
@@ -126,8 +126,9 @@ def test_example_gcode_follows_the_cl_path(tmp_path: Path, name: str, offset: tu
 @pytest.mark.parametrize(("name", "offset"), CASES)
 def test_example_passes_linuxcnc(tmp_path: Path, name: str, offset: tuple[float, float, float]) -> None:
     """LinuxCNC's interpreter accepts the program and reaches the joints the pipeline computed."""
-    from verne_post.gcode import write_program
-    from verne_post.pipeline import PostOptions, gcode_format, postprocess
+    from verne_post.options import PostOptions
+    from verne_post.output.gcode import write_program
+    from verne_post.pipeline import gcode_format, postprocess
 
     machine = vp.load_machine()
     result = postprocess(EXAMPLES / name, machine, PostOptions(work_offset=offset))
@@ -157,8 +158,9 @@ def test_repeated_runs_give_identical_files(tmp_path: Path) -> None:
 def test_margins_between_block_ends_stay_above_the_ends(name: str, offset: tuple[float, float, float]) -> None:
     """checks.motion_samples samples feed-block midpoints only near thresholds: that relies on
     the margins at a midpoint never being measurably below the smaller end value."""
-    from verne_post.checks import motion_samples
-    from verne_post.pipeline import PostOptions, postprocess
+    from verne_post.checks.limits import motion_samples
+    from verne_post.options import PostOptions
+    from verne_post.pipeline import postprocess
 
     machine = vp.load_machine()
     result = postprocess(EXAMPLES / name, machine, PostOptions(work_offset=offset))

@@ -15,13 +15,13 @@ from click.testing import CliRunner
 
 import verne_post as vp
 from verne_post.api import Status, classify, pose_margins
-from verne_post.checking import Checked, check_poses
+from verne_post.checks.headroom import headroom, smallest
+from verne_post.checks.stage import Checked, check_poses
 from verne_post.cl import read_toolpath
 from verne_post.cli import main
-from verne_post.headroom import headroom, smallest
+from verne_post.motion.poses import machine_poses
 from verne_post.options import PostOptions
-from verne_post.placement import place
-from verne_post.poses import machine_poses
+from verne_post.placement.search import place
 
 DATA = Path(__file__).parent / "data"
 EXAMPLES = Path(__file__).parent.parent / "examples"

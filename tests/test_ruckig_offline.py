@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 from click.testing import CliRunner
 
-import verne_post.timing
+import verne_post.planning.timing
 from verne_post.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -30,7 +30,7 @@ def _no_network(*args: Any, **kwargs: Any) -> Any:
 
 def test_rapids_give_ruckig_no_waypoints_and_python_opens_no_socket(tmp_path: Path,
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    real = verne_post.timing.Ruckig
+    real = verne_post.planning.timing.Ruckig
     made: list[Any] = []
     inputs: list[Any] = []
 
@@ -43,7 +43,7 @@ def test_rapids_give_ruckig_no_waypoints_and_python_opens_no_socket(tmp_path: Pa
             inputs.append(inp)
             return self.inner.calculate(inp, *args)
 
-    monkeypatch.setattr(verne_post.timing, "Ruckig", Spy)
+    monkeypatch.setattr(verne_post.planning.timing, "Ruckig", Spy)
     for name in ("socket", "create_connection", "getaddrinfo"):
         monkeypatch.setattr(socket, name, _no_network)
     # in one process: the spy sees every rapid planned (helper processes are traced below)

@@ -1,7 +1,7 @@
 """Moves between cuts: every rapid, retract, reorientation, tool change and home move of a posted
 program, judged as the tool tip moves relative to the part through the forward kinematics.
 
-The judge here is independent of verne_post.safe_motion and of verne_post.verify: the program is
+The judge here is independent of verne_post.motion.safe_motion and of verne_post.verify.verifier: the program is
 read back from its text, each block's joint-space line sampled and taken through the forward
 kinematics (no inverse kinematics), and every sample of a move between cuts must lie within
 1 mm of the CL path between the CL points the move joins (and never below that path), on a
@@ -19,10 +19,11 @@ from scipy.spatial import cKDTree
 
 import verne_post as vp
 from verne_post.cl import read_toolpath
-from verne_post.gcode_reader import read_gcode
-from verne_post.pipeline import PostOptions, post
-from verne_post.safe_motion import dip_below, upward_normal
-from verne_post.verify import verify_program
+from verne_post.motion.safe_motion import dip_below, upward_normal
+from verne_post.options import PostOptions
+from verne_post.pipeline import post
+from verne_post.verify.gcode_reader import read_gcode
+from verne_post.verify.verifier import verify_program
 
 DATA = Path(__file__).resolve().parent / "data"
 SAMPLES = DATA / "cl-samples"

@@ -12,7 +12,7 @@ import verne_post as vp
 from benchmarks.scurve import scurve_baseline_time
 from tests.paths import helix
 from tests.reference import ruckig_time
-from verne_post.timing import Limits, baseline_time, lower_bound_time
+from verne_post.planning.timing import Limits, baseline_time, lower_bound_time
 
 V, A, J = 1000.0, 10_000.0, 200_000.0  # a^2 / J = 500 mm/s: the speed above which a full ramp reaches a
 LIMITS = Limits(np.full(5, V), np.full(5, A), np.full(5, J))

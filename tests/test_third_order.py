@@ -1,4 +1,4 @@
-"""The third-order programme's pieces (verne_post.third_order), against brute force.
+"""The third-order programme's pieces (verne_post.planning.third_order), against brute force.
 
 The plans themselves are checked in tests/test_timing.py (every limit at 1 ms and at their own
 analytic derivatives); here the bookkeeping they rest on: which pairs of grid intervals a
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from verne_post import third_order
+from verne_post.planning import third_order
 
 
 def _profile(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, float]:

@@ -15,10 +15,11 @@ from tests.test_pipeline import CASES, EXAMPLES
 from verne_post.cl import read_toolpath
 from verne_post.cli import MIN_PERIOD, main
 from verne_post.errors import InputError
-from verne_post.pipeline import PostOptions, postprocess
-from verne_post.schedule import Schedule, Segment
-from verne_post.timing import RapidPlan
-from verne_post.trajectory import MAX_DECIMALS, default_decimals, write_timed_csv
+from verne_post.options import PostOptions
+from verne_post.output.trajectory import MAX_DECIMALS, default_decimals, write_timed_csv
+from verne_post.pipeline import postprocess
+from verne_post.planning.schedule import Schedule, Segment
+from verne_post.planning.timing import RapidPlan
 
 NAMES = ("rho1", "rho2", "rho3", "theta1", "theta2")
 # The impeller runs for 20 minutes: sampled at 5 ms (its jerk filter spans ~60 ms), the rest at 1 ms.

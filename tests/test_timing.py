@@ -18,9 +18,9 @@ from scipy.interpolate import CubicSpline
 import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
 from tests.reference import ruckig_time
-from verne_post import feed_planner, schedule
-from verne_post.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
-from verne_post.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
+from verne_post.planning import feed_planner, schedule
+from verne_post.planning.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
+from verne_post.planning.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
 
 DT = 1e-3
 SLACK = 1.02  # finite differences at 1 ms against the limits
@@ -333,7 +333,7 @@ def _row_through_the_pole(machine: vp.Machine, rng: np.random.Generator) -> tupl
 
 def test_rows_through_the_pole_take_a_faster_third_order_plan_within_every_limit(machine: vp.Machine,
                                                                                  limits: Limits) -> None:
-    """optimize=True: the third-order programme's plan (verne_post.third_order) is kept where
+    """optimize=True: the third-order programme's plan (verne_post.planning.third_order) is kept where
     it is faster than the filtered plan, and holds every limit at 1 ms and at its own analytic
     derivatives."""
     rng = np.random.default_rng(11)

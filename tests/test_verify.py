@@ -21,10 +21,10 @@ import verne_post as vp
 from verne_post.cl import read_toolpath
 from verne_post.cli import main
 from verne_post.errors import InputError
-from verne_post.gcode_reader import read_gcode
-from verne_post.linearise import distance_to_segment
-from verne_post.rs274 import find_rs274, inverse_time_rate, run_rs274
-from verne_post.verify import Finding, verify_program
+from verne_post.motion.linearise import distance_to_segment
+from verne_post.verify.gcode_reader import read_gcode
+from verne_post.verify.rs274 import find_rs274, inverse_time_rate, run_rs274
+from verne_post.verify.verifier import Finding, verify_program
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 NAMES = ["nx_variable_axis_inch", "nx_swarf_inch_crlf", "impeller_5axis"]
@@ -231,7 +231,7 @@ def test_program_cut_off_before_m30(program_text: list[str], tmp_path: Path) -> 
 
 def test_failed_verification_writes_nothing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A writer that put a wrong number in the text: the post run stops with exit 3, no file."""
-    from verne_post.gcode import GcodeWriter
+    from verne_post.output.gcode import GcodeWriter
 
     real = GcodeWriter.body
 
@@ -438,7 +438,7 @@ def test_tool_length_from_the_command_line_is_in_the_program(tmp_path: Path) -> 
 def test_near_finds_every_pair_within_the_radius_in_each_coordinate() -> None:
     """_near (a hashed grid) against every pair tested one by one: clusters, exact repeats, pairs
     exactly the radius apart, points on the grid's cell sides, negative and large coordinates."""
-    from verne_post.verify import _CELL, _near
+    from verne_post.verify.verifier import _CELL, _near
 
     rng = np.random.default_rng(5)
     for _ in range(60):
@@ -463,7 +463,7 @@ def test_cl_points_take_the_earliest_block_at_or_after_the_one_before() -> None:
     last such block; -1 where none is within tolerance."""
     from types import SimpleNamespace
 
-    from verne_post.verify import _angle, _match
+    from verne_post.verify.verifier import _angle, _match
 
     rng = np.random.default_rng(21)
     tol, axis_tol = 0.005, np.radians(0.05)

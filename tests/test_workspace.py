@@ -12,9 +12,9 @@ from click.testing import CliRunner
 
 import verne_post as vp
 from verne_post.api import Status, classify, pose_margins
+from verne_post.checks.headroom import headroom, smallest
 from verne_post.cli import main
-from verne_post.headroom import headroom, smallest
-from verne_post.workspace import solve_tips, tool_axis
+from verne_post.placement.workspace import solve_tips, tool_axis
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 

@@ -22,8 +22,8 @@ from .api import (
 from .batch import BatchOptions, BatchResult, batch
 from .kinematics import module_fk_all, module_fk_working, module_ik_all, module_ik_working
 from .machine import Geometry, Machine, load_machine
+from .placement.workspace import workspace
 from .version import __version__ as __version__  # re-exported: verne_post.__version__
-from .workspace import workspace
 
 __all__ = [
     "BatchOptions", "BatchResult", "FKResult", "Geometry", "IKResult", "Machine", "Status", "batch",

@@ -34,15 +34,15 @@ from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 
-from .allocator import keep_freed_memory
-from .atomic import atomic_write, check_writable
 from .errors import InputError, OutputError, UserError, one_line
-from .gcode import PREAMBLE, with_header_line
 from .machine import DEFAULT_MACHINE, load_machine
+from .output.atomic import atomic_write, check_writable
+from .output.gcode import PREAMBLE, with_header_line
+from .processes.allocator import keep_freed_memory
 from .version import __version__
 
 if TYPE_CHECKING:
-    from .pipeline import PostOptions
+    from .options import PostOptions
 
 #: Status of a file in the summary and the exit code the single-file command gives for it.
 EXIT_CODES = {"ok": 0, "skipped": 0, "bad-input": 2, "violations": 3, "error": 1}
@@ -73,7 +73,7 @@ class BatchOptions:
 
     def __post_init__(self) -> None:
         if self.post is None:  # the pipeline (and its planner) is imported only where posting happens
-            from .pipeline import PostOptions
+            from .options import PostOptions
 
             object.__setattr__(self, "post", PostOptions())
 
@@ -416,7 +416,7 @@ def _collect(name: str, future: Future[Outcome], output: Path, digest: str) -> B
                          figures["seconds"], None, digest)
     try:
         if outcome.report is not None:
-            from .tables import write_json
+            from .output.tables import write_json
 
             write_json(output.with_suffix(".json"), outcome.report)
         if outcome.output is not None:
@@ -506,7 +506,7 @@ def dask_client(scheduler: str, jobs: int | None = None) -> Iterator[Any]:
             # preload: the workers keep freed memory, as the local processes do (twice as fast)
             cluster = stack.enter_context(LocalCluster(n_workers=jobs or os.cpu_count() or 1, threads_per_worker=1,
                                                        processes=True, dashboard_address=None,
-                                                       preload=["verne_post.allocator"]))
+                                                       preload=["verne_post.processes.allocator"]))
             client = stack.enter_context(Client(cluster))
         else:
             try:

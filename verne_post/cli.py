@@ -22,7 +22,6 @@ from typing import TYPE_CHECKING, Any
 import click
 import numpy as np
 
-from .allocator import keep_freed_memory
 from .api import (
     JOINT_NAMES,
     Status,
@@ -35,15 +34,16 @@ from .api import (
     pose_margins,
     within_limits,
 )
-from .atomic import atomic_write, check_writable
 from .errors import InputError, UserError, one_line, quote
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import MAX_TOOL_LENGTH, Machine, load_machine
-from .tables import read_table, write_table
-from .workspace import EXTENT_Z
+from .output.atomic import atomic_write, check_writable
+from .output.tables import read_table, write_table
+from .placement.workspace import EXTENT_Z
+from .processes.allocator import keep_freed_memory
 
 if TYPE_CHECKING:
-    from .verify import Verification
+    from .verify.verifier import Verification
 
 
 class _DefaultToPost(click.Group):
@@ -283,8 +283,8 @@ def ik_command(poses: str | None, output: str | None, tip: tuple[float, ...] | N
 
 
 def _ik_batch(machine: Machine, poses: str, output: str | None, tool_length: float, scale: float) -> None:
-    from .branch import solve_path
     from .cl import read_pose_csv
+    from .motion.branch import solve_path
 
     _check_outputs(poses, output)
     toolpath = read_pose_csv(poses)
@@ -480,7 +480,7 @@ def _post_options(function: Callable[..., Any]) -> Callable[..., Any]:
 
 def _options_from(no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
     """The :class:`PostOptions` of the command-line choices (machine, --quiet and the like removed)."""
-    from .pipeline import PostOptions
+    from .options import PostOptions
 
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
@@ -550,7 +550,7 @@ def _html(report_path: str | None) -> bool:
 
 def _finish(machine: Machine, options: Any, result: Any, report_path: str | None, quiet: bool,
             max_messages: int) -> None:
-    from .tables import write_json
+    from .output.tables import write_json
 
     if not quiet:
         for warning in result.warnings[:max_messages]:
@@ -563,7 +563,7 @@ def _finish(machine: Machine, options: Any, result: Any, report_path: str | None
         click.echo(f"verne-post: ... and {len(result.violations) - max_messages} more violations", err=True)
     # the report after the violations: they are printed even when the report cannot be written
     if _html(report_path):
-        from .report_html import write_html_report
+        from .report.html import write_html_report
 
         write_html_report(report_path, machine, options, result)
     elif report_path:
@@ -700,7 +700,7 @@ def toolpath_command(cl_file: str, output: str | None, quiet: bool, **reading: A
     line). Arcs, helices, splines and cycles are expanded. The dialect and the conventions used
     go to stderr, to compare with the CAM system's own display.
     """
-    from .toolpath import MOTION_KINDS
+    from .cl.toolpath import MOTION_KINDS
 
     tp = _read_cl(cl_file, **reading)
     if not quiet:
@@ -753,8 +753,8 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
                    **reading: Any) -> None:
     """Verify a joint-space G-code program: limits and margins along the motion, and with
     --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
-    from .tables import write_json
-    from .verify import verify_program
+    from .output.tables import write_json
+    from .verify.verifier import verify_program
 
     machine = load_machine(machine_path)
     try:
@@ -797,10 +797,10 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     Prints the offset to use with 'post --work-offset X Y Z' (or use '--work-offset auto' there).
     Exit code 3 when no offset works, with the reason.
     """
-    from .pipeline import PostOptions
-    from .placement import place
-    from .poses import machine_poses
-    from .tables import write_json
+    from .motion.poses import machine_poses
+    from .output.tables import write_json
+    from .options import PostOptions
+    from .placement.search import place
 
     machine = load_machine(machine_path)
     options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, **reading)
@@ -850,7 +850,7 @@ def workspace_command(output: str, machine_path: str | None, tool_length: float,
     """Map of the tool-tip positions (table frame) the machine reaches with the tool axis at
     --tilt and --rotary: x-z and y-z sections through the table centre and a plan view,
     coloured by the smallest headroom to any limit, the limiting constraints labelled."""
-    from .workspace import plot_workspace, workspace
+    from .placement.workspace import plot_workspace, workspace
 
     if not output.lower().endswith((".png", ".svg")):
         raise InputError("the output must end in .png or .svg")

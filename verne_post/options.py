@@ -10,14 +10,14 @@ import os
 from dataclasses import dataclass, field
 from typing import Literal
 
-from .topp import Engine
+from .planning.topp import Engine
 
 
 @dataclass(frozen=True)
 class PostOptions:
     """User choices (mm and degrees, as on the command line)."""
 
-    # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.
+    # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.search.
     work_offset: tuple[float, float, float] | Literal["auto"] | None = None
     tool_length: float | None = None  # mm, for tools whose length nothing else gives
     units: Literal["mm", "inch"] | None = None  # override the CL file's units
@@ -30,6 +30,6 @@ class PostOptions:
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
     feed: float | None = None  # mm/min: the feed of feed moves before the CL file's first FEDRAT
     plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
-    planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
-    optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
+    planner: Engine = "copp"  # TOPP2 engine of the feed moves (planning.topp): copp-py, or toppra the reference
+    optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.planning.third_order)
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning

@@ -9,7 +9,7 @@ anyway: at a rapid, or where a feed sequence starts (the planner plans each from
 so its timing is the same. What the other stages carry across is handed on explicitly: the
 angle pair of each run is chosen over the whole program before the parts are solved (a
 pre-pass keeping two angles and a status per pose), the rotary's continuity and the pole
-cone's interpolation continue from the part before (:class:`~verne_post.branch.BranchState`),
+cone's interpolation continue from the part before (:class:`~verne_post.motion.branch.BranchState`),
 the feed move into a part is linearised from the part before's last pose, the checks and the
 timing of the move into a part start from its last block, and the verification reads on from
 where it stood. The program is the same however it is split (tests/test_parts.py). The
@@ -35,9 +35,8 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from .api import JOINT_NAMES, joint_bounds
-from .atomic import atomic_write
-from .branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
-from .checking import (
+from .checks.limits import Violation, check_program, theta2_rate_warnings
+from .checks.stage import (
     Checked,
     between_violations,
     check_poses,
@@ -47,22 +46,23 @@ from .checking import (
     safe_settings,
     solve_poses,
 )
-from .checks import Violation, check_program, theta2_rate_warnings
 from .cl import read_toolpath
+from .cl.toolpath import Dwell, Event, ToolChange
 from .errors import OutputError
-from .gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
-from .helpers import Helper, VerifierProcess, available, outcome
-from .linearise import Blocks
 from .machine import Machine
+from .motion.branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
+from .motion.linearise import Blocks
+from .motion.poses import MachinePoses, machine_poses
+from .motion.safe_motion import between_cuts
 from .options import PostOptions
-from .placement import Placement, place
-from .poses import MachinePoses, machine_poses
-from .safe_motion import between_cuts
-from .schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
-from .timing import Limits
-from .toolpath import Dwell, Event, ToolChange
-from .topp import Engine
-from .verify import Reference, Verification, Verifier, feed_top, verify_program
+from .output.atomic import atomic_write
+from .output.gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
+from .placement.search import Placement, place
+from .planning.schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
+from .planning.timing import Limits
+from .planning.topp import Engine
+from .processes.helpers import Helper, VerifierProcess, available, outcome
+from .verify.verifier import Reference, Verification, Verifier, feed_top, verify_program
 from .version import __version__
 
 _MARGINS = ("serial", "parallel", "machine", "rod_clearance")
@@ -307,7 +307,7 @@ class TimingTask:
 
 
 def plan_timing(task: TimingTask) -> Timing:
-    """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.schedule.plan_program`)."""
+    """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.planning.schedule.plan_program`)."""
     start = time.perf_counter()
     try:
         speed = np.where(task.rapid, task.rapid_speed, _tip_speed(task.feed, task.inverse_time, task.tip,
@@ -586,7 +586,7 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     G-code to ``output`` (atomically; None: only check).
 
     The blocks of each part are formatted, verified (with ``verify``: read back from their text
-    and checked against the part's CL poses, :class:`~verne_post.verify.Verifier`) and set
+    and checked against the part's CL poses, :class:`~verne_post.verify.verifier.Verifier`) and set
     aside in a temporary file; the output is written only when no part has a violation and the
     verification passes, with the header's figures (block count, cycle time, the certified
     deviations) known from all the parts. ``timing_figures``: gather the planner's figures for
@@ -595,7 +595,7 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
     ``before_writing`` gets the outcome before the output is written (and may stop it, raising).
 
     With ``options.workers`` > 1 the planning and the verification run in helper processes
-    (:mod:`verne_post.helpers`), a part behind the main process, which solves the next part
+    (:mod:`verne_post.processes.helpers`), a part behind the main process, which solves the next part
     meanwhile: the same program, sooner. The seconds of ``timing`` and ``verify`` are then the
     helpers' (overlapping the others), ``waiting`` the main process's wait for them.
     """
@@ -791,7 +791,7 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
     """Write the program of ``result`` as G-code to ``path`` (atomically).
 
     With ``verify`` the program text is first read back and verified against the CL path with
-    the forward kinematics (:mod:`verne_post.verify`); only a program that passes is written,
+    the forward kinematics (:mod:`verne_post.verify.verifier`); only a program that passes is written,
     with the certified figures as a header line. Returns the verification (None without).
     """
     fmt = gcode_format(machine)
@@ -816,7 +816,7 @@ def write_output(result: PostResult, machine: Machine, options: PostOptions, pat
     positions with ``decimals`` (default: enough for third differences at the period)."""
     if output_format == "gcode":
         return write_gcode(result, machine, options, path, verify=verify)
-    from .trajectory import write_timed_csv
+    from .output.trajectory import write_timed_csv
 
     blocks = result.blocks
     write_timed_csv(path, machine, result.schedule, result.poses.tool_length[blocks.pose],

@@ -18,7 +18,7 @@ import numpy as np
 from ..api import JOINT_NAMES, forward_kinematics
 from ..errors import InputError
 from ..machine import MAX_MM, MAX_TOOL_LENGTH, Machine
-from ..tables import read_table
+from ..output.tables import read_table
 from .model import Poses
 
 REQUIRED = (*JOINT_NAMES, "tool_length", "x", "y", "z")

@@ -160,7 +160,7 @@ last; std in typical errors (1 mm for lengths, 0.1 mm for slider zeros, 0.1 mrad
 
 
 def report_json(data: dict[str, Any]) -> str:
-    from ..tables import _json_ready
+    from ..output.tables import _json_ready
 
     return json.dumps(_json_ready(data), indent=2, allow_nan=False) + "\n"
 

@@ -4,7 +4,7 @@
 values changed), ``CYCLE/INIT`` (SolidWorks CAM's marker before the cycle record) is accepted; a
 tool change also ends a cycle. Each GOTO while a cycle is active is the hole's top point: the tool
 is positioned over it (:func:`.cycles.approach_moves`), then the cycle's moves run along the tool
-axis and its dwells become :class:`~verne_post.toolpath.Dwell` events. ``RTRCTO,AUTO`` returns to
+axis and its dwells become :class:`~verne_post.cl.toolpath.Dwell` events. ``RTRCTO,AUTO`` returns to
 the level of the tool's position when the cycle was defined or re-activated (G98).
 """
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-from verne_post.toolpath import MIN_FEED, Comment, Coolant, Dwell, Spindle, Stop
+from verne_post.cl.toolpath import MIN_FEED, Comment, Coolant, Dwell, Spindle, Stop
 
 from .lexer import Record
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState

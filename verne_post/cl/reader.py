@@ -1,4 +1,4 @@
-"""Read APT / CLSF cutter-location files and CSV pose lists into a :class:`~verne_post.toolpath.Toolpath`.
+"""Read APT / CLSF cutter-location files and CSV pose lists into a :class:`~verne_post.cl.toolpath.Toolpath`.
 
 The reader runs in stages, each a module of its own:
 
@@ -43,9 +43,9 @@ from typing import Any, Literal
 
 import numpy as np
 
+from verne_post.cl.toolpath import MIN_FEED, Toolpath
 from verne_post.errors import InputError
-from verne_post.tables import read_table
-from verne_post.toolpath import MIN_FEED, Toolpath
+from verne_post.output.tables import read_table
 
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes

@@ -14,8 +14,8 @@ from typing import Any, Literal
 
 import numpy as np
 
+from verne_post.cl.toolpath import MOTION_KINDS, Event, Toolpath
 from verne_post.errors import CheckError, InputError
-from verne_post.toolpath import MOTION_KINDS, Event, Toolpath
 
 from .dialects import Dialect
 

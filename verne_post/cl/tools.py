@@ -3,7 +3,7 @@
 ``LOAD/TOOL,n[,ADJUST,h]``, ``LOADTL/n[,LENGTH,l][,ADJUST|OSETNO,h][,IN,p]`` and ``SELECT/TOOL,n``
 (a load only when the operation header has no LOAD/LOADTL, otherwise a pre-selection; in NX
 always the pre-selection, its tool_preselect event, NX's load being LOAD/TOOL) give one
-:class:`~verne_post.toolpath.ToolChange` per load. ``TLDATA/MILL|DRILL,dia,r,length,...`` and
+:class:`~verne_post.cl.toolpath.ToolChange` per load. ``TLDATA/MILL|DRILL,dia,r,length,...`` and
 ``CUTTER/dia[,...]`` in the same header (the records between two motions) are merged into that
 load, before or after it. Without any load in the header they produce a ToolChange for the
 current tool number (0 if none was ever loaded, with a warning) when the geometry differs from
@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from verne_post.toolpath import Comment, ToolChange
+from verne_post.cl.toolpath import Comment, ToolChange
 
 from .lexer import Record
 from .state import MAX_COORD, MAX_TOOL_NUMBER, ReaderState, Token

@@ -13,9 +13,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .errors import InputError
-from .machine import Machine
-from .toolpath import MIN_FEED, Event, ToolChange, Toolpath
+from ..cl.toolpath import MIN_FEED, Event, ToolChange, Toolpath
+from ..errors import InputError
+from ..machine import Machine
 
 
 @dataclass(frozen=True)

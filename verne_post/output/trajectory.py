@@ -22,14 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .api import JOINT_NAMES, forward_kinematics
+from ..api import JOINT_NAMES, forward_kinematics
+from ..errors import InputError
+from ..kinematics import machine_jacobian
+from ..machine import Machine
+from ..planning.feed_planner import FeedPlan
+from ..planning.schedule import Schedule
 from .atomic import atomic_write
-from .errors import InputError
-from .feed_planner import FeedPlan
-from .kinematics import machine_jacobian
-from .machine import Machine
 from .numbers import csv_lines
-from .schedule import Schedule
 
 CHUNK = 50_000
 

@@ -3,7 +3,7 @@
 Units: joints (N, 5) are rho1..3 in mm and theta1, theta2 in rad; tool tips in mm relative to
 the part; times in s; limits per second (mm/s, rad/s, mm/s^2, ...). Nothing here reads files.
 
-Feed sequences are planned by :mod:`verne_post.feed_planner`; here are the limits, the bounds
+Feed sequences are planned by :mod:`verne_post.planning.feed_planner`; here are the limits, the bounds
 and baselines that plans are compared with, and the rapids.
 
 Rapids
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
 
-from .errors import CheckError
+from ..errors import CheckError
 
 __all__ = ["DoubleS", "Limits", "PlanningError", "RapidPlan", "baseline_time", "block_min_time", "lower_bound_time",
            "plan_rapid", "rest_to_rest"]
@@ -73,7 +73,7 @@ class Limits:
 
 def _check_limits(limits: Limits) -> Limits:
     if not isinstance(limits, Limits):
-        raise TypeError("limits must be a verne_post.timing.Limits")
+        raise TypeError("limits must be a verne_post.planning.timing.Limits")
     return limits
 
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from .atomic import atomic_write
-from .errors import InputError
 
 
 def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: Sequence[str] = ()

@@ -54,7 +54,7 @@ def keep_freed_memory() -> bool:
 def dask_setup(service: object) -> None:
     """Dask's preload hook (docs.dask.org, "Customize Initialization": a ``--preload`` module's
     ``dask_setup`` is called as the worker starts): ``dask worker ADDRESS --preload
-    verne_post.allocator`` makes a worker that posts CL files keep freed memory too.
+    verne_post.processes.allocator`` makes a worker that posts CL files keep freed memory too.
 
     It matters more there: a Dask worker runs its tasks in a thread, whose malloc arena gives
     memory back even more eagerly. A 3,000-point job took 3.0-3.8 s in a worker (380,000 page

@@ -21,7 +21,7 @@ planned in four steps:
    squared path speed being linear in s between gridpoints, the gridpoints of an interval are
    lowered until its line meets every cap inside it: a cap that changes along the path, as the
    tip's speed per unit of s does, is followed, not its lowest value over two intervals).
-2. TOPP2 (:mod:`verne_post.topp`: copp-py by default, toppra as the reference) with those caps
+2. TOPP2 (:mod:`verne_post.planning.topp`: copp-py by default, toppra as the reference) with those caps
    and the joint accelerations ``|q_j' sddot + q_j'' sdot^2| <= 0.97 a_j``, time-scaled so the
    squared path speeds are O(1). A grid interval every ``w / 4`` of travel at the capped speed
    (long blocks subdivided, runs of short blocks merged), at least 32, at most about one per
@@ -66,7 +66,7 @@ closed form, its peaks the limits it meets (:func:`_straight_plans`). A short mu
 sequence (a re-orientation) is also tried as an S-curve in s, each ramp and jerk phase with the
 limits of the stretch it covers (:func:`_scurve_laws`); verified as in step 4, it replaces the
 filtered plan where it is faster. With ``optimize``, each sequence of more than 40 blocks is also
-planned by a linear programme (:mod:`verne_post.third_order`) whose squared path speeds,
+planned by a linear programme (:mod:`verne_post.planning.third_order`) whose squared path speeds,
 filtered by a window two of its longest grid intervals wide, meet the jerk limits as that filter
 produces them; verified the same way, the plan replaces the filtered one where it is faster
 (:meth:`_Planner.third_order_plans`).
@@ -130,7 +130,7 @@ _SHRINK = 0.97  # extra factor applied when lowering caps after a violation
 # the filter doubles the jerk there, while other excesses are a few per cent.
 _TURN_JERK = 1.3
 _NARROWER = 0.9  # a turn's window is narrowed to its own ramp's if that is this much narrower
-# The third-order programme (optimize=True, verne_post.third_order): on sequences of more blocks
+# The third-order programme (optimize=True, verne_post.planning.third_order): on sequences of more blocks
 # than this (shorter ones gained nothing on the 105k job: their S-curves are as good), on a grid
 # this much finer, with these shares of the acceleration and jerk limits (the programme sees them
 # at the gridpoints only; 1.0 gives the same plans, after more rounds), in at most this many rounds.
@@ -260,7 +260,7 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
     max_refinements : rounds of local slow-down allowed to meet every limit.
     engine : the TOPP2 engine, ``"copp"`` (copp-py) or ``"toppra"`` (the reference).
     optimize : also plan each sequence of more than 40 blocks by the third-order linear
-        programme (:mod:`verne_post.third_order`) and keep that plan where it is verified and
+        programme (:mod:`verne_post.planning.third_order`) and keep that plan where it is verified and
         faster: about 1 % off long rows whose speed climbs from one limit to another, for
         planning several times slower.
 
@@ -269,7 +269,7 @@ def plan_feeds(sequences: Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]], l
     the limits was found. Raises ValueError for malformed input.
     """
     if not isinstance(limits, Limits):
-        raise TypeError("limits must be a verne_post.timing.Limits")
+        raise TypeError("limits must be a verne_post.planning.timing.Limits")
     if not (math.isfinite(angular_feed) and angular_feed > 0):
         raise ValueError(f"angular_feed must be positive (rad/s), got {angular_feed}")
     if not (math.isfinite(min_duration) and min_duration >= 0):
@@ -1232,7 +1232,7 @@ class _Planner:
 
     def third_order_plans(self) -> dict[int, FeedPlan]:
         """Verified plans of this batch's sequences by the third-order linear programme
-        (:mod:`verne_post.third_order`), for a planner built with ``erode=0``: the caps as they
+        (:mod:`verne_post.planning.third_order`), for a planner built with ``erode=0``: the caps as they
         are, the programme keeping the filtered law within them. Rounds as in :meth:`plan`: a
         law over a cap has the caps of the gridpoints around the excess lowered by it, one over
         an acceleration or jerk limit its sequence's margins; a sequence that finds no law

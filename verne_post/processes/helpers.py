@@ -18,9 +18,9 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
-from .errors import HelperError
-from .machine import Machine
-from .verify import Reference, Verification, Verifier
+from ..errors import HelperError
+from ..machine import Machine
+from ..verify.verifier import Reference, Verification, Verifier
 
 T = TypeVar("T")
 
@@ -106,7 +106,7 @@ def _result() -> Verification:
 
 
 class VerifierProcess:
-    """A :class:`~verne_post.verify.Verifier` in a helper process, started before its settings
+    """A :class:`~verne_post.verify.verifier.Verifier` in a helper process, started before its settings
     are known (the work offset comes after placement): :meth:`start` gives them, :meth:`read`
     hands a part over and returns at once, :meth:`result` waits for every part (and raises
     what a reading raised)."""
@@ -118,7 +118,7 @@ class VerifierProcess:
         self.seconds = 0.0  # spent verifying, once :meth:`result` has been called
 
     def start(self, **settings: Any) -> VerifierProcess:
-        """The settings of :class:`~verne_post.verify.Verifier` (source, tolerances, work offset)."""
+        """The settings of :class:`~verne_post.verify.verifier.Verifier` (source, tolerances, work offset)."""
         self._started = self._helper.submit(_new_verifier, settings)
         return self
 

@@ -1,6 +1,6 @@
 """Third-order time laws of feed sequences as a linear programme (``--optimize``).
 
-The planner (:mod:`verne_post.feed_planner`) meets the jerk limits by filtering a second-order
+The planner (:mod:`verne_post.planning.feed_planner`) meets the jerk limits by filtering a second-order
 (TOPP2) profile with a moving average of width ``w = 1.1 max_j(a_j / J_j)``: every corner of
 the profile becomes a jerk-limited ramp, at the cost of the window's lag and of caps lowered
 around their points (the average mixes the faster speeds on one side of a corner into the

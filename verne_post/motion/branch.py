@@ -18,9 +18,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .api import IKResult, Status, assess, concatenate, inverse_kinematics_pair, joint_bounds
-from .kinematics import axis_from_angles, wrap_angle
-from .machine import Machine
+from ..api import IKResult, Status, assess, concatenate, inverse_kinematics_pair, joint_bounds
+from ..kinematics import axis_from_angles, wrap_angle
+from ..machine import Machine
 
 
 @dataclass(frozen=True)

@@ -12,13 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .branch import BranchState, Pairs, PathIK, solve_path
-from .checks import Violation, check_program
-from .linearise import Blocks, linearise
-from .machine import Machine
-from .options import PostOptions
-from .poses import MachinePoses
-from .safe_motion import SafeSettings, between_cuts
+from ..machine import Machine
+from ..motion.branch import BranchState, Pairs, PathIK, solve_path
+from ..motion.linearise import Blocks, linearise
+from ..motion.poses import MachinePoses
+from ..motion.safe_motion import SafeSettings, between_cuts
+from ..options import PostOptions
+from .limits import Violation, check_program
 
 
 @dataclass(frozen=True)

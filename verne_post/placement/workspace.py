@@ -4,10 +4,10 @@ A parallel kinematic machine's workspace is no box: it changes with the tool len
 tool axis. For a given tilt (angle of the tool axis from the table normal) and rotary angle
 theta2 (the table's turn, which fixes the axis' direction in the table frame) every grid point
 of three sections is solved with the working-mode IK of the machine and given its smallest
-headroom (:mod:`verne_post.headroom`) and the constraint that sets it: an x-z section and a
+headroom (:mod:`verne_post.checks.headroom`) and the constraint that sets it: an x-z section and a
 y-z section through the table centre (y = 0, x = 0) and a plan view (x-y) at height ``z``.
 
-    ws = verne_post.workspace(machine, tool_length=60, tilt=30)
+    ws = verne_post.placement.workspace(machine, tool_length=60, tilt=30)
     for s in ws.sections: s.u, s.v, s.headroom, s.limit   # arrays, mm and fractions
 
 :func:`plot_workspace` draws them with matplotlib (the optional ``[plot]`` extra).
@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .api import Status, inverse_kinematics_pair
-from .headroom import LABELS, headroom, smallest
-from .kinematics import axis_from_angles
-from .machine import Machine
+from ..api import Status, inverse_kinematics_pair
+from ..checks.headroom import LABELS, headroom, smallest
+from ..kinematics import axis_from_angles
+from ..machine import Machine
 
 #: The sections' extent (mm, table frame): beyond the VERNE's reach for any tool.
 EXTENT_XY = (-1100.0, 1100.0)
@@ -134,10 +134,10 @@ def plot_workspace(ws: Workspace, path: str | Path, program_tips: np.ndarray | N
         import matplotlib.pyplot as plt
         from matplotlib.colors import ListedColormap
     except ImportError:  # pragma: no cover - depends on the installation
-        from .errors import InputError
+        from ..errors import InputError
 
         raise InputError("drawing workspace maps needs matplotlib: pip install 'verne-post[plot]'") from None
-    from .atomic import atomic_write
+    from ..output.atomic import atomic_write
 
     figure, axes = plt.subplots(1, 3, figsize=(16, 5.8), constrained_layout=True)
     colours = plt.get_cmap("viridis")

@@ -3,8 +3,8 @@
 A feed sequence is a run of feed blocks between rapids, tool changes, feed-mode changes and
 corners sharper than ``timing.corner_angle`` (in joint space weighted by the velocity limits);
 each is planned from rest to rest with the programmed feed as the tool-tip speed limit, the
-joint velocity, acceleration and jerk limits (``verne_post.feed_planner.plan_feeds``, all the
-sequences at once). A move between cuts (:mod:`verne_post.safe_motion`: a rapid kept on its
+joint velocity, acceleration and jerk limits (``verne_post.planning.feed_planner.plan_feeds``, all the
+sequences at once). A move between cuts (:mod:`verne_post.motion.safe_motion`: a rapid kept on its
 line, a retract, reorientation or approach) is split the same way into rapid sequences, planned
 alike at the joint limits with only the optional rapid tip-speed cap (and no rotary feed on
 turns with the tip still); a rapid sequence of one block is a jerk-limited, phase-synchronised
@@ -121,8 +121,8 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
     Feed sequences are independent problems: with ``workers`` > 1 they are planned in that many
     processes (same results). ``jerk=False`` leaves out the jerk limits of feed moves (for
     comparisons; rapids are always jerk-limited). ``engine`` is the TOPP2 engine (see
-    :mod:`verne_post.topp`); ``optimize`` adds the third-order programme on long sequences
-    (:func:`~verne_post.feed_planner.plan_feeds`). Raises :class:`SequenceError` naming the
+    :mod:`verne_post.planning.topp`); ``optimize`` adds the third-order programme on long sequences
+    (:func:`~verne_post.planning.feed_planner.plan_feeds`). Raises :class:`SequenceError` naming the
     block where a sequence cannot be planned.
     """
     duration = np.zeros(len(joints))

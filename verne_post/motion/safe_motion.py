@@ -36,13 +36,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .api import IKResult, Status, concatenate, forward_kinematics
+from ..api import IKResult, Status, concatenate, forward_kinematics
+from ..cl.toolpath import ToolChange
+from ..kinematics import axis_from_angles, wrap_angle
+from ..machine import Machine
 from .branch import solve_with_theta2
-from .kinematics import axis_from_angles, wrap_angle
 from .linearise import Blocks, angle_to_arc, distance_to_segment, slerp
-from .machine import Machine
 from .poses import MachinePoses
-from .toolpath import ToolChange
 
 #: Splitting aims at this share of each tolerance (as the feed moves' linearisation does).
 MARGIN = 0.8

@@ -2,7 +2,7 @@
 
 The VERNE's workspace is no box: which part zeros (work offsets, mm, part zero in the table
 frame) let a whole program run depends on every pose's tool axis and tool length. The search
-maximises the program's smallest *headroom* (see :mod:`verne_post.headroom`: every limit and
+maximises the program's smallest *headroom* (see :mod:`verne_post.checks.headroom`: every limit and
 singularity margin as a comparable fraction, 0 at the limit):
 
 1. Screen (fast, vectorised): a few hundred CL poses (the extreme ones in 26 directions, per
@@ -30,15 +30,15 @@ from typing import Any
 
 import numpy as np
 
-from .api import Status, classify, joint_bounds, pose_margins
-from .branch import solve_path
-from .checking import Checked, check_poses
-from .checks import motion_samples
-from .headroom import UNREACHABLE, describe, headroom, smallest
-from .kinematics import machine_ik_working, margins, module_ik_working
-from .machine import Machine
-from .options import PostOptions
-from .poses import MachinePoses
+from ..api import Status, classify, joint_bounds, pose_margins
+from ..checks.headroom import UNREACHABLE, describe, headroom, smallest
+from ..checks.limits import motion_samples
+from ..checks.stage import Checked, check_poses
+from ..kinematics import machine_ik_working, margins, module_ik_working
+from ..machine import Machine
+from ..motion.branch import solve_path
+from ..motion.poses import MachinePoses
+from ..options import PostOptions
 
 AXES = "xyz"
 #: Room is found to this resolution (mm); the reported room is the last distance that runs.
@@ -103,7 +103,7 @@ class _Points:
     length: np.ndarray  # (P,) mm
     theta2: np.ndarray  # (P,) rad
     pair: np.ndarray  # (P,) angle pair the branch stage chose (+1, -1), 0 before any full check
-    run: np.ndarray  # (P,) runs as in verne_post.branch (one pair each): split at sequences and pole-cone edges
+    run: np.ndarray  # (P,) runs as in verne_post.motion.branch (one pair each): split at sequences and pole-cone edges
     in_cone: np.ndarray  # (P,) theta2 interpolated by the branch stage: no choice of pair
 
     def screen(self, rows: np.ndarray) -> _Points:
@@ -304,7 +304,7 @@ def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: 
 
 def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> np.ndarray | None:
     """The room's full check at ``offset`` (mm): None where the program runs, else the CL poses
-    to screen next. It stops at the first failure (see :func:`verne_post.checking.check_poses`)."""
+    to screen next. It stops at the first failure (see :func:`verne_post.checks.stage.check_poses`)."""
     shifted = replace(poses, tip=poses.tip + offset)
     checked = check_poses(machine, shifted, options, first_failure=True)
     return _verdict(machine, poses, shifted, checked).worst if checked.violations else None

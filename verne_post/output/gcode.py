@@ -25,7 +25,7 @@ are ``G1`` in inverse-time mode (``G93``) with an ``F`` word on every block, ``F
 
 Numbers have fixed decimals (``GcodeFormat``), never ``-0``. Motion blocks are formatted with
 numpy byte arithmetic, a chunk of blocks at a time, not one Python format call per block.
-Output is deterministic (no dates). Checked against LinuxCNC's interpreter (``verne_post.rs274``).
+Output is deterministic (no dates). Checked against LinuxCNC's interpreter (``verne_post.verify.rs274``).
 """
 
 from __future__ import annotations
@@ -39,10 +39,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from verne_post.atomic import atomic_write
+from verne_post.cl.toolpath import Comment, Coolant, Dwell, Event, Spindle, Stop, ToolChange
 from verne_post.errors import CheckError
-from verne_post.numbers import fixed_field, scaled_int
-from verne_post.toolpath import Comment, Coolant, Dwell, Event, Spindle, Stop, ToolChange
+from verne_post.output.atomic import atomic_write
+from verne_post.output.numbers import fixed_field, scaled_int
 
 __all__ = [
     "MAX_COMMENT_CHARS",
@@ -150,7 +150,7 @@ class Program:
 
 
 #: The comment that ends a G1 block of a move between cuts: the controller runs it as written
-#: (G93, so the planned time), and a reader tells it from a cut (verne_post.gcode_reader).
+#: (G93, so the planned time), and a reader tells it from a cut (verne_post.verify.gcode_reader).
 RAPID_MARK = "(RAPID)"
 
 

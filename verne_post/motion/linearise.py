@@ -13,9 +13,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .api import IKResult, Status, concatenate, forward_kinematics
+from ..api import IKResult, Status, concatenate, forward_kinematics
+from ..machine import Machine
 from .branch import PathIK, solve_with_theta2
-from .machine import Machine
 from .poses import MachinePoses
 
 #: Fractions of a block where the deviation is measured while splitting. The error of a
@@ -82,7 +82,7 @@ class Blocks:
     #                       cuts that leave the pose, to a tool change or home: above 1)
     result: IKResult  # per block: joints (mm, rad), status, margins, alpha, ...
     unresolved: np.ndarray  # (K,) CL pose indices whose move could not be brought within tolerance
-    between: np.ndarray  # (M,) bool: a block of a move between cuts (verne_post.safe_motion)
+    between: np.ndarray  # (M,) bool: a block of a move between cuts (verne_post.motion.safe_motion)
 
     @property
     def joints(self) -> np.ndarray:

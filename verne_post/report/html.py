@@ -25,15 +25,16 @@ from typing import Any
 
 import numpy as np
 
-from .api import JOINT_NAMES, joint_bounds
-from .atomic import atomic_write
-from .headroom import headroom, smallest
-from .machine import Machine
-from .pipeline import PostOptions, PostResult, feed_speed
-from .schedule import Schedule, time_budget
-from .timing import Limits
-from .trajectory import samples, tip_speed
-from .workspace import boundary_labels, workspace
+from ..api import JOINT_NAMES, joint_bounds
+from ..checks.headroom import headroom, smallest
+from ..machine import Machine
+from ..output.atomic import atomic_write
+from ..output.trajectory import samples, tip_speed
+from ..options import PostOptions
+from ..pipeline import PostResult, feed_speed
+from ..placement.workspace import boundary_labels, workspace
+from ..planning.schedule import Schedule, time_budget
+from ..planning.timing import Limits
 
 #: Trajectory samples taken over the whole cycle, and display columns after decimation.
 SAMPLES = 40_000

@@ -17,9 +17,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .api import JOINT_NAMES, joint_bounds
-from .kinematics import Margins, margins, module_ik_working
-from .machine import Geometry, GeometryConfig, Machine
+from ..api import JOINT_NAMES, joint_bounds
+from ..kinematics import Margins, margins, module_ik_working
+from ..machine import Geometry, GeometryConfig, Machine
 
 MARGIN_NAMES = ("rod_clearance", "serial", "parallel", "machine")
 #: Column names of :func:`headroom`; "reach" is the pseudo-constraint of an unreachable pose.

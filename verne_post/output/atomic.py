@@ -27,7 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from .errors import OutputError
+from ..errors import OutputError
 
 #: Middle of every temporary's name: ``.{output name}.verne-{pid}-{random}.tmp``.
 TEMP_TAG = ".verne-"

@@ -25,7 +25,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["GcodeProgram", "ReadState", "ToolNote", "read_gcode"]
 

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .api import IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
-from .kinematics import Margins
-from .machine import Machine
+from ..api import IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
+from ..kinematics import Margins
+from ..machine import Machine
 
 _JOINT_WORDS = ("slider rho1", "slider rho2", "slider rho3", "tilt theta1", "rotary theta2")
 RAPID_SAMPLES = np.arange(1, 8) / 8.0

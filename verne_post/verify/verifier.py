@@ -42,14 +42,14 @@ from typing import Any
 
 import numpy as np
 
-from .api import JOINT_NAMES, classify, forward_kinematics, joint_bounds, pose_margins
-from .errors import InputError
+from ..api import JOINT_NAMES, classify, forward_kinematics, joint_bounds, pose_margins
+from ..cl.toolpath import Toolpath
+from ..errors import InputError
+from ..kinematics import Margins
+from ..machine import Machine
+from ..motion.linearise import angle_to_arc, distance_to_segment
+from ..motion.poses import MachinePoses
 from .gcode_reader import GcodeProgram, ReadState, read_gcode
-from .kinematics import Margins
-from .linearise import angle_to_arc, distance_to_segment
-from .machine import Machine
-from .poses import MachinePoses
-from .toolpath import Toolpath
 
 __all__ = ["Finding", "Reference", "Verification", "Verifier", "verify_blocks", "verify_program"]
 

@@ -1,0 +1,2 @@
+"""What a post reports besides the program: the HTML report (``html``).
+"""
