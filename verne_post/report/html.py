@@ -28,9 +28,9 @@ import numpy as np
 from ..api import JOINT_NAMES, joint_bounds
 from ..checks.headroom import headroom, smallest
 from ..machine import Machine
+from ..options import PostOptions
 from ..output.atomic import atomic_write
 from ..output.trajectory import samples, tip_speed
-from ..options import PostOptions
 from ..pipeline import PostResult, feed_speed
 from ..placement.workspace import boundary_labels, workspace
 from ..planning.schedule import Schedule, time_budget
