@@ -13,7 +13,8 @@ from click.testing import CliRunner
 import verne_post as vp
 from tests.test_pipeline import CASES, EXAMPLES
 from verne_post.cl import read_toolpath
-from verne_post.cli import MIN_PERIOD, main
+from verne_post.cli import main
+from verne_post.cli.common import MIN_PERIOD
 from verne_post.errors import InputError
 from verne_post.options import PostOptions
 from verne_post.output.trajectory import MAX_DECIMALS, default_decimals, write_timed_csv
