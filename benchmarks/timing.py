@@ -45,7 +45,7 @@ from benchmarks.topp3 import topp3_reference  # noqa: E402
 from verne_post.motion.linearise import Blocks  # noqa: E402
 from verne_post.options import PostOptions  # noqa: E402
 from verne_post.pipeline import feed_speed, postprocess  # noqa: E402
-from verne_post.planning import feed_planner  # noqa: E402
+from verne_post.planning.feed import grid  # noqa: E402
 from verne_post.planning.schedule import Schedule, Segment, plan_program  # noqa: E402
 from verne_post.planning.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
@@ -110,12 +110,12 @@ def measure(points: int, engines: tuple[str, ...], sample: int) -> None:
 @contextlib.contextmanager
 def _finer_grid(factor: float) -> Iterator[None]:
     """The planner's TOPP2 grid ``factor`` times finer (intervals per filter width, and per block)."""
-    saved = feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK
-    feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK = (x * factor for x in saved)
+    saved = grid._GRID_PER_WINDOW, grid._MAX_INTERVALS_PER_BLOCK
+    grid._GRID_PER_WINDOW, grid._MAX_INTERVALS_PER_BLOCK = (x * factor for x in saved)
     try:
         yield
     finally:
-        feed_planner._GRID_PER_WINDOW, feed_planner._MAX_INTERVALS_PER_BLOCK = saved
+        grid._GRID_PER_WINDOW, grid._MAX_INTERVALS_PER_BLOCK = saved
 
 
 def _sequence(blocks: Blocks, speed: np.ndarray, segment: Segment) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

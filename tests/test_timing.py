@@ -19,7 +19,9 @@ import verne_post as vp
 from tests.paths import TOOL, axis_from, helix, joints_along, zigzag
 from tests.reference import ruckig_time
 from verne_post.planning import feed_planner, schedule
-from verne_post.planning.feed_planner import FeedPlan, _not_a_knot, plan_feed, plan_feeds
+from verne_post.planning.feed import rounds, scurve, segments
+from verne_post.planning.feed.segments import not_a_knot
+from verne_post.planning.feed_planner import FeedPlan, plan_feed, plan_feeds
 from verne_post.planning.timing import Limits, PlanningError, baseline_time, lower_bound_time, plan_rapid
 
 DT = 1e-3
@@ -255,14 +257,14 @@ def test_unmet_jerk_limit_raises_instead_of_returning(machine: vp.Machine, limit
                                                       helix_path: tuple[np.ndarray, np.ndarray],
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     """A short move needs a local slow-down round to meet the jerk limit: with none allowed it fails.
-    (An S-curve along the path, feed_planner._scurve_plans, plans it within the limits at once:
+    (An S-curve along the path, rounds.Planner._scurve_plans, plans it within the limits at once:
     here the filtered plan alone.)"""
     joints, tip = helix_path
     feed = np.full(5, 50.0)
     plan = plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0, max_refinements=0)
     assert plan.gridpoints == 0  # the S-curve
     check_feed_plan(machine, plan, joints[:6], tip[:6], feed, limits)
-    monkeypatch.setattr(feed_planner._Planner, "_scurve_plans", lambda self, seqs, planned: {})
+    monkeypatch.setattr(rounds.Planner, "_scurve_plans", lambda self, seqs, planned: {})
     with pytest.raises(PlanningError, match="jerk limits found near waypoint"):
         plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0, max_refinements=0)
     plan = plan_feed(joints[:6], tip[:6], feed, limits, angular_feed=1.0)
@@ -292,13 +294,13 @@ def _reorientation(machine: vp.Machine, rng: np.random.Generator) -> tuple[np.nd
 
 def test_reorientations_take_a_faster_s_curve_within_every_limit(machine: vp.Machine, limits: Limits,
                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    """Short re-orientations: the S-curve along the path (feed_planner._scurve_plans) is kept
+    """Short re-orientations: the S-curve along the path (rounds.Planner._scurve_plans) is kept
     where it is faster than the filtered plan, and holds every limit at 1 ms."""
     rng = np.random.default_rng(7)
     moves = [_reorientation(machine, rng) for _ in range(24)]
     feeds = [np.full(len(joints) - 1, 50.0) for joints, _ in moves]
     plans = plan_feeds([(j, t, f) for (j, t), f in zip(moves, feeds, strict=True)], limits, angular_feed=1.0)
-    monkeypatch.setattr(feed_planner._Planner, "_scurve_plans", lambda self, seqs, planned: {})
+    monkeypatch.setattr(rounds.Planner, "_scurve_plans", lambda self, seqs, planned: {})
     filtered = plan_feeds([(j, t, f) for (j, t), f in zip(moves, feeds, strict=True)], limits, angular_feed=1.0)
     scurves = 0
     for (joints, tip), feed, plan, other in zip(moves, feeds, plans, filtered, strict=True):
@@ -357,7 +359,7 @@ def test_rows_through_the_pole_take_a_faster_third_order_plan_within_every_limit
 
 
 def test_s_curve_reaches_the_end_at_rest_within_each_phase_limits() -> None:
-    """feed_planner._scurve: from rest to rest over s in [0, 1] with its own limits per phase; with
+    """scurve._scurve: from rest to rest over s in [0, 1] with its own limits per phase; with
     the same limits in every phase, ruckig's time-optimal move."""
     rng = np.random.default_rng(3)
     count = 400
@@ -368,8 +370,8 @@ def test_s_curve_reaches_the_end_at_rest_within_each_phase_limits() -> None:
     same = np.arange(count) < 100
     acc[same] = acc[same, :1]
     jerk[same] = jerk[same, :1]
-    durations, jerks, _ = feed_planner._scurve(cap, acc, jerk)
-    profiles = feed_planner._scurve_profiles(np.arange(count), durations, jerks)
+    durations, jerks, _ = scurve._scurve(cap, acc, jerk)
+    profiles = scurve.scurve_profiles(np.arange(count), durations, jerks)
     for r in range(count):
         b0, b1 = profiles.bfirst[r], profiles.bfirst[r + 1]
         law = feed_planner.Cubics(profiles.breaks[b0:b1], profiles.coef[:, b0 - r:b1 - r - 1])
@@ -483,7 +485,7 @@ def test_batched_splines_are_scipys_not_a_knot_splines() -> None:
         x = np.concatenate([np.cumsum(rng.uniform(0.5, 1.5, n) * 10.0 ** rng.uniform(-spread, 0.0, n)) for n in sizes])
         y = rng.normal(size=(len(x), 4))
         first = np.r_[0, np.cumsum(sizes)]
-        coef = _not_a_knot(x, y, first)
+        coef = not_a_knot(x, y, first)
         for r, n in enumerate(sizes):
             a = first[r]
             reference = CubicSpline(x[a:a + n], y[a:a + n], axis=0, bc_type="not-a-knot")
@@ -509,7 +511,7 @@ def test_piece_search_is_the_exact_search_within_each_sequence() -> None:
         first = np.r_[0, np.cumsum([len(v) for v in starts])]
         if first[-1] == 0:
             continue
-        pieces = feed_planner._Pieces(np.concatenate(starts), first)
+        pieces = segments.Pieces(np.concatenate(starts), first)
         seq = rng.integers(0, len(starts), size=600)
         x = rng.uniform(-scale, 2.0 * scale, size=600)
         near = rng.random(600) < 0.8
@@ -724,13 +726,13 @@ def test_a_sequence_the_tight_plan_cannot_certify_gets_the_safe_plan(
     a 3M-point job)."""
     joints, tip = zigzag_path
     feed = np.full(len(joints) - 1, 100.0)
-    real = feed_planner._Planner.plan
+    real = rounds.Planner.plan
 
-    def tight_fails(self: feed_planner._Planner) -> list:
+    def tight_fails(self: rounds.Planner) -> list:
         plans = real(self)
         return [PlanningError("tight plan failed", 0) for _ in plans] if self.erode < 0.5 else plans
 
-    monkeypatch.setattr(feed_planner._Planner, "plan", tight_fails)
+    monkeypatch.setattr(rounds.Planner, "plan", tight_fails)
     plan = plan_feed(joints, tip, feed, limits, angular_feed=1.0)
     assert plan.filter_width == pytest.approx(1.25 * np.max(limits.acceleration / limits.jerk))
     check_feed_plan(machine, plan, joints, tip, feed, limits)
