@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 import verne_post as vp
 from verne_post.cl import read_toolpath
+from verne_post.errors import InputError
 from verne_post.gcode_reader import read_gcode
 from verne_post.pipeline import PostOptions, post
 from verne_post.safe_motion import dip_below, upward_normal
@@ -299,3 +300,31 @@ def test_dip_below_a_segment_agrees_with_a_brute_force_scan():
         heights = [(p[k] - a[k]) @ (np.cos(t) * n + np.sin(t) * np.cross(d[k], n)) for t in (0.0,)]
         expected[k] = max(-heights[0], under_end, 0.0)
     assert np.allclose(found, expected, atol=1e-9)
+
+
+def test_the_rapid_feed_of_the_machine_file_caps_the_tip_speed_of_every_move_between_cuts(tmp_path, machine):
+    capped = vp.Machine.model_validate({**machine.model_dump(), "safe": {**machine.safe.model_dump(),
+                                                                         "rapid_feed": 3000.0}})
+    cl = tmp_path / "clearance.cls"
+    cl.write_text(CLEARANCE_CL)
+    text, _ = _post(tmp_path, capped, cl, work_offset=(0.0, 0.0, 250.0))
+    program = read_gcode(text)
+    between = np.flatnonzero(program.rapid & np.isfinite(program.duration))
+    assert between.size > 10
+    f = np.linspace(0.0, 1.0, 33)
+    speeds = []
+    for m in between:
+        q = program.joints[m - 1] + f[:, None] * (program.joints[m] - program.joints[m - 1])
+        tip = vp.forward_kinematics(capped, q, tool_length=program.tool_length[m]).tip
+        speeds.append(np.sum(np.linalg.norm(np.diff(tip, axis=0), axis=1)) / program.duration[m] * 60.0)
+    assert max(speeds) <= 3000.0 * 1.01  # the written F words' rounding
+    assert max(speeds) > 2000.0  # the cap is what limits them
+
+
+def test_positions_outside_the_joints_travel_are_refused(tmp_path, machine):
+    text = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
+    bad = text.replace("tool_change: {rho1: 100.0", "tool_change: {rho1: 1400.0")
+    assert bad != text
+    (tmp_path / "m.yaml").write_text(bad)
+    with pytest.raises(InputError, match=r"positions.tool_change.rho1 = 1400 is outside the travel of rho1"):
+        vp.load_machine(tmp_path / "m.yaml")
