@@ -159,6 +159,23 @@ def test_summary_csv_and_json_columns(tmp_path: Path) -> None:
     assert summary["files"][1]["line"] == FAR_LINE and summary["files"][1]["tools"] == [0]
 
 
+def test_summary_inside_the_output_folder_the_batch_makes(tmp_path: Path) -> None:
+    """OUT does not exist yet: the batch makes it, and the summary goes into it; a summary in a
+    folder nobody makes is still refused before any file is posted."""
+    files = _parts(tmp_path / "parts")
+    out = tmp_path / "new" / "out"
+    result = _batch_cli(str(files[0]), "-o", str(out), "--jobs", "1", "--summary", str(out / "summary.csv"))
+    assert result.exit_code == 0, result.stderr
+    with open(out / "summary.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [(r["file"], r["status"]) for r in rows] == [(str(files[0]), "ok")]
+    assert (out / "a_line.nc").is_file()
+
+    other = tmp_path / "other"
+    result = _batch_cli(str(files[0]), "-o", str(other), "--summary", str(tmp_path / "nowhere" / "s.csv"))
+    assert result.exit_code != 0 and "does not exist" in result.stderr and not other.exists()
+
+
 def test_skip_unchanged_really_skips(tmp_path: Path) -> None:
     files = _parts(tmp_path / "parts")
     machine = tmp_path / "verne.yaml"

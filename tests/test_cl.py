@@ -249,7 +249,30 @@ def test_per_rev_feed_with_spindle_off_is_an_error(tmp_path: Path) -> None:
 
 def test_feed_move_before_any_fedrat(tmp_path: Path) -> None:
     e = err(tmp_path, "UNITS/MM\nRAPID\nGOTO/0,0,0\nGOTO/1,0,0\n")
-    assert (e.reason, e.line) == ("feed move before any FEDRAT", 4)
+    assert e.line == 4 and e.reason.startswith("feed move before any FEDRAT") and "--feed" in e.reason
+
+
+def test_feed_option_gives_the_feed_before_the_first_fedrat(tmp_path: Path) -> None:
+    """NCL's APT source may have no FEDRAT at all: --feed (mm/min, also for an inch file) is the
+    feed of every feed move before the first FEDRAT, and the FEDRAT's own feed follows it."""
+    text = "UNITS/INCHES\nGOTO/0,0,0\nGOTO/1,0,0\nRAPID\nGOTO/1,1,0\nGOTO/2,1,0\nFEDRAT/10,IPM\nGOTO/3,1,0\n"
+    tp = cl(tmp_path, text, feed=500.0)
+    assert np.array_equal(tp.rapid, [False, False, True, False, False])
+    np.testing.assert_allclose(tp.feed[[0, 1, 3]], 500.0)
+    assert tp.feed[4] == pytest.approx(254.0)
+    assert len(tp.notes) == 1 and "FEED 500 MM/MIN FROM --feed FOR THE 3 FEED MOVES" in tp.notes[0]
+    assert "CL LINE 2" in tp.notes[0]
+
+
+def test_feed_option_unused_is_said(tmp_path: Path) -> None:
+    tp = cl(tmp_path, "UNITS/MM\nFEDRAT/100\nGOTO/0,0,0\nGOTO/1,0,0\n", feed=500.0)
+    np.testing.assert_allclose(tp.feed, 100.0)
+    assert tp.notes == () and any("--feed 500 not used" in w for w in tp.warnings)
+
+
+def test_feed_option_out_of_range(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="--feed must be from"):
+        cl(tmp_path, "UNITS/MM\nGOTO/0,0,0\n", feed=0.0)
 
 
 @pytest.mark.parametrize("record", ["FEDRAT/0", "FEDRAT/-5,MMPM", "FEDRAT/MMPM", "FEDRAT/FAST,5", "FEDRAT/1,2"])

@@ -154,6 +154,18 @@ def test_nx_countersink_feeds_to_the_point_itself() -> None:
     assert [(h, k) for h, k, _ in hs] == [(3.0, "rapid"), (0.0, "feed"), (3.0, "rapid")]
 
 
+@pytest.mark.parametrize("subtype", ["DEEP", "BRKCHP"])
+def test_nx_deep_without_a_step_to_the_point_itself_is_one_feed(subtype: str) -> None:
+    """NX's CYCLE/DRILL,DEEP,RAPTO,3,FEDTO,0 (no STEP): Post Builder's simulated deep cycle with
+    step1 = 0 feeds once to the point (its peck loop never runs)."""
+    spec = parse_cycle(["DRILL", subtype, "RAPTO", 3.0, "FEDTO", 0.0, "MMPM", 250.0])
+    top, axis = np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.6, 0.8])
+    hs = heights(cycle_moves(spec, top, axis), top, axis)
+    expected = nx_simulated(subtype.lower(), 3.0, 0.0, 3.0, step1=0.0)
+    assert [(h, k) for h, k, _ in hs] == [(pytest.approx(h), k) for h, k in expected]
+    assert [k for _, k in expected] == ["rapid", "feed", "rapid"]
+
+
 def test_creo_deep_and_peck_table() -> None:
     spec = parse_cycle(["DEEP", "DEPTH", 3.5, "STEP", 1.0, "MMPM", 50.0, "CLEAR", 2.0])
     top, axis = np.zeros(3), np.array([0.0, 0.0, 1.0])
@@ -328,7 +340,9 @@ def tokens(record: str) -> list[float | str]:
         ("DRILL,FEDTO,-3,RAPTO,1,RAPTO,2", "CYCLE/DRILL: RAPTO given twice"),
         ("DRILL,FEDTO,-3,RAPTO,1,RTRCTO,AUTO,RTRCTO,5", "CYCLE/DRILL: RTRCTO given twice"),
         ("DRILL,FEDTO,-3,RAPTO,MMPM,100", "CYCLE/DRILL: RAPTO needs a number"),
-        ("DRILL,DEEP,FEDTO,-30,RAPTO,3", "CYCLE/DRILL,DEEP needs a peck depth (STEP, INCR or 1STPECK)"),
+        ("DRILL,DEEP,FEDTO,-30,RAPTO,3", "CYCLE/DRILL,DEEP pecks to 30 below the point but gives no peck depth "
+                                         "(STEP, INCR or 1STPECK): NX's own cycle pecks by the step and never gets "
+                                         "below the point without one"),
         ("DRILL,FEDTO,-30,RAPTO,3,STEP,5", "CYCLE/DRILL does not peck but gives peck depths"),
         ("DEEP,FEDTO,-30,RAPTO,3,STEP,0", "CYCLE/DEEP peck depths must be positive, got 0"),
         ("DEEP2,FEDTO,9,1STPECK,3,STEP,1,RAPTO,3", "CYCLE/DEEP2 gives both STEP/INCR and 1STPECK/SUBPECK"),

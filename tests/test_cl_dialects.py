@@ -24,6 +24,8 @@ MAKINO = SAMPLES / "makino_ffcam_plane1_mm.cldata"
 CREO_ROUGH = SAMPLES / "creo8_schruppen_roughing_mm.ncl"
 CREO_PROFILE = SAMPLES / "creo8_profilfraesen_mm.ncl"
 CREO_THREAD = SAMPLES / "creo_v19_thread_mill_helical_inch.ncl"
+CATIA_ISO = SAMPLES / "catia_v5_isoparametric_5axis_mm.aptsource"
+CL_SUFFIXES = (".cls", ".ncl", ".cldata", ".aptsource")
 
 NX_HEAD = "TOOL PATH/OP,TOOL,EM10\n$$ centerline data\nUNITS/MM\nFEDRAT/MMPM,100\n"  # NX CLSF (4 lines)
 CREO_HEAD = "$$*          Pro/CLfile  Version 8.0 - 8.0.3.0\nUNITS / MM\nFEDRAT / 100.0,  MMPM\n"  # 3 lines
@@ -297,9 +299,12 @@ def test_creo_records_as_its_supported_cl_data_commands_define_them(tmp_path: Pa
     assert [e.mode for e in tp.events if isinstance(e, Coolant)] == ["FLOOD"]
     assert tp.feed[1] == pytest.approx(2 * 304.8)
     np.testing.assert_allclose(tp.tip[tp.line == 9], [[10, 0, 30], [10, 0, 2], [10, 0, -5], [10, 0, 30]])
+    from verne_post.errors import CheckError
+
     for head in ("HEAD / BOTH", "HEAD / 2, OPTION, 1"):
-        e = refused(tmp_path, CREO_HEAD + f"GOTO / 0, 0, 40\n{head}\nGOTO / 1, 0, 40\n")
-        assert e.line == 5 and "one spindle" in e.reason
+        with pytest.raises(CheckError) as info:  # a program for another machine: exit 3
+            read(tmp_path, CREO_HEAD + f"GOTO / 0, 0, 40\n{head}\nGOTO / 1, 0, 40\n")
+        assert info.value.line == 5 and "one spindle" in info.value.reason
 
 
 def test_arc_direction_override(tmp_path: Path) -> None:
@@ -564,7 +569,7 @@ def test_nx_zlevel_arc_length_and_tangency() -> None:
 
 def test_every_real_sample_reads_without_input_error() -> None:
     for path in sorted(SAMPLES.iterdir()):
-        if path.suffix in (".cls", ".ncl", ".cldata"):
+        if path.suffix in CL_SUFFIXES:
             tp = read_cl(path)
             assert len(tp) > 0 and not any("unknown record" in w for w in tp.warnings), path.name
 
@@ -590,7 +595,7 @@ def test_toolpath_command_writes_what_was_read(tmp_path: Path) -> None:
     assert any(r[6] == "141" for r in cells)
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in SAMPLES.iterdir() if p.suffix in (".cls", ".ncl", ".cldata")))
+@pytest.mark.parametrize("name", sorted(p.name for p in SAMPLES.iterdir() if p.suffix in CL_SUFFIXES))
 def test_check_on_real_samples_never_bad_input(name: str) -> None:
     """Every real sample is read; `check` ends in 0 or 3 (the part may not fit at offset 0), never 2.
 
@@ -679,3 +684,228 @@ def test_defsub_calsub_replays_the_subroutine(tmp_path: Path) -> None:
 def test_bad_subroutines(tmp_path: Path, body: str, line: int, message: str) -> None:
     e = refused(tmp_path, APT_HEAD + "GOTO/0,0,0\n" + body)
     assert e.line == line and message in e.reason
+
+
+# --------------------------------------------------------------------------- CATIA V5 APT
+
+
+def _catia_records(text: str) -> list[tuple[str, str]]:
+    """An independent scan of CATIA's APT: a line ending in '$' continues on the next, the two
+    joined with nothing between them (a number split in two joins into one); '$$' lines are
+    comments."""
+    out: list[tuple[str, str]] = []
+    pending = ""
+    for line in text.splitlines():
+        if not pending and line.lstrip().startswith("$$"):
+            continue
+        if line.rstrip().endswith("$"):
+            pending += line.rstrip()[:-1]
+            continue
+        body, pending = pending + line, ""
+        word, _, args = body.partition("/")
+        out.append((word.strip().upper(), args))
+    return out
+
+
+def test_catia_real_file_reads_as_an_independent_scan_of_it() -> None:
+    records = _catia_records(CATIA_ISO.read_text())
+    tips, axes, rapid, feeds = [], [], [], []
+    next_rapid, feed = False, math.nan
+    for word, args in records:
+        if word == "RAPID":
+            next_rapid = True
+        elif word == "FEDRAT":
+            feed = float(args.split(",")[0])  # every FEDRAT of the file is 'f,MMPM'
+        elif word == "GOTO":
+            values = [float(v) for v in args.split(",")]
+            tips.append(values[:3])
+            axes.append(values[3:])
+            rapid.append(next_rapid)
+            feeds.append(math.nan if next_rapid else feed)
+            next_rapid = False
+    tp = read_cl(CATIA_ISO)
+    assert len(tp) == len(tips) == 163
+    np.testing.assert_allclose(tp.tip, tips, atol=1e-9)
+    np.testing.assert_allclose(tp.axis, np.array(axes) / np.linalg.norm(axes, axis=1)[:, None], atol=1e-12)
+    np.testing.assert_array_equal(tp.rapid, rapid)
+    np.testing.assert_allclose(tp.feed, feeds)
+    # tool axes to 140 deg from vertical: normal CAM output (CL-DIALECTS), read as they are
+    assert np.degrees(np.arccos(tp.axis[:, 2].min())) > 130
+
+
+def test_catia_user_typed_pp_words_give_one_grouped_warning() -> None:
+    tp = read_cl(CATIA_ISO)
+    grouped = [w for w in tp.warnings if "post-processor words in CATIA's output" in w]
+    assert len(grouped) == 1
+    for word, line in (("SFSDFSDF", 27), ("AICC/ON,10", 40), ("INVERSE/ON", 59)):
+        assert f"{word} (line {line})" in grouped[0]
+    assert not any("unknown record" in w for w in tp.warnings)
+
+
+CATIA_HEAD = "$$*CATIA0\n$$ Manufacturing Program.1\nMULTAX\nLOADTL/1\n"  # 4 lines
+
+
+def test_catia_pp_words_in_a_small_file(tmp_path: Path) -> None:
+    text = CATIA_HEAD + "LOOP/START,15\nAICC/ON,10\nqwerty\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\nLOOP/END\n"
+    tp = read(tmp_path, text)
+    grouped = [w for w in tp.warnings if "post-processor words" in w]
+    assert len(grouped) == 1 and grouped[0].startswith(f"{tmp_path / 't.cls'}:5: 4 post-processor words")
+    assert "LOOP/START,15 (line 5), AICC/ON,10 (line 6), QWERTY (line 7), LOOP/END (line 10)" in grouped[0]
+
+
+def test_a_malformed_spindle_record_replaced_before_any_motion_is_a_warning(tmp_path: Path) -> None:
+    from verne_post.toolpath import Spindle
+
+    text = CATIA_HEAD + "SPINDL/900CCLW\nSPINDL/10000,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\n"
+    tp = read(tmp_path, text)
+    [warning] = [w for w in tp.warnings if "is malformed" in w]
+    assert warning.startswith(f"{tmp_path / 't.cls'}:5: SPINDL/900CCLW is malformed")
+    assert "SPINDL/10000,CLW at line 6 replaces it" in warning
+    assert [(e.rpm, e.direction) for e in tp.events if isinstance(e, Spindle)] == [(10000.0, "CW")]
+
+
+@pytest.mark.parametrize("text", [
+    CATIA_HEAD + "SPINDL/900CCLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\nSPINDL/10000,CLW\n",  # motion first
+    CATIA_HEAD + "SPINDL/900CCLW\nFEDRAT/100,MMPM\n",  # nothing replaces it
+    "UNITS/MM\nFEDRAT/100\nSPINDL/900CCLW\nGOTO/0,0,0\n",  # any dialect
+])
+def test_a_malformed_spindle_record_still_in_force_at_a_motion_is_an_error(tmp_path: Path, text: str) -> None:
+    e = refused(tmp_path, text)
+    assert e.line == text.splitlines().index("SPINDL/900CCLW") + 1 and "900CCLW" in e.reason
+
+
+def test_a_tool_change_ends_a_malformed_spindle_record_before_any_motion(tmp_path: Path) -> None:
+    text = CATIA_HEAD + "SPINDL/400CLW\nLOADTL/2\nSPINDL/500,CLW\nFEDRAT/100,MMPM\nGOTO/0,0,0,0,0,1\n"
+    tp = read(tmp_path, text)
+    [warning] = [w for w in tp.warnings if "is malformed" in w]
+    assert warning.startswith(f"{tmp_path / 't.cls'}:5: SPINDL/400CLW is malformed") and "line 6" in warning
+
+
+# --------------------------------------------------------------------------- programs for other machines
+
+
+@pytest.mark.parametrize(("text", "line", "what"), [
+    # CATIA's mill-turn output: TURRET instead of LOADTL, then MMPR feeds and XZ moves
+    (CATIA_HEAD.replace("LOADTL/1", "TURRET/1") + "SPINDL/200,SMM,CLW\nFEDRAT/0.2,MMPR\nGOTO/20,0,5\n", 4, "turning"),
+    ("MODE/TURN\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/0.2,MMPR\nGOTO/20,0,5\n", 1, "turning"),  # Autodesk's ISO 4343 post
+    (APT_HEAD + "GOTO/0,0,0\nHEAD/2\nGOTO/1,0,0\n", 4, "several heads"),
+    (APT_HEAD + "HEAD/BOTH\nGOTO/1,0,0\n", 3, "several heads"),
+    # CATIA's Lathe Machining sample: CHANNEL,1 on a multi-turret lathe, TOOLNO/1,TURN, MMPR feeds
+    ("$$*CATIA0\nCHANNEL,1\nTOOLNO/1,TURN\nFEDRAT/ 0.4000,MMPR\n", 2, "several"),
+    ("$$*CATIA0\nCUTTER/ 1.000000\nTOOLNO/1,TURN\nFEDRAT/ 0.4000,MMPR\nGOTO / 77.0, 0.0, 45.0\n", 3, "turning"),
+])
+def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path, text: str, line: int,
+                                                                   what: str) -> None:
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+    from verne_post.errors import CheckError
+
+    path = tmp_path / "t.cls"
+    path.write_text(text)
+    with pytest.raises(CheckError) as info:
+        read_cl(path)
+    assert info.value.line == line and what in info.value.reason
+    result = CliRunner().invoke(main, ["check", str(path), "-q"])
+    assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
+    assert len(result.stderr.splitlines()) == 1
+
+
+def test_mode_mill_is_read(tmp_path: Path) -> None:
+    tp = read(tmp_path, "MODE/MILL\nPARTNO/'P1'\nUNITS/MM\nFEDRAT/100,MMPM\nGOTO/20,0,5\n")
+    assert len(tp) == 1 and not tp.warnings
+
+
+# --------------------------------------------------------------------------- frames by the tool's direction
+
+
+def _nx_msys_down(axis_k: float) -> str:
+    """NX CLSF with MSYS/0,0,0,0,1,0,1,0,0 (X and Y swapped: Z down in the absolute frame) and GOTOs
+    whose tool axis is (0,0,axis_k) in the MCS: CL-DIALECTS's two real cases."""
+    rows = "".join(f"GOTO/{x:.1f},{0.5 * x:.1f},-5.0,0.0,0.0,{axis_k:.1f}\n" for x in range(10))
+    return NX_HEAD + "MSYS/10,20,30,0,1,0,1,0,0\n" + rows  # MSYS on line 5
+
+
+def test_msys_down_with_axes_up_in_the_mcs_is_read_in_the_mcs(tmp_path: Path) -> None:
+    tp = read(tmp_path, _nx_msys_down(1.0))
+    np.testing.assert_allclose(tp.axis, np.tile([0.0, 0.0, 1.0], (10, 1)))
+    np.testing.assert_allclose(tp.tip[3], [3.0, 1.5, -5.0])
+    assert tp.notes == () and not any("frames read as" in w for w in tp.warnings)
+
+
+def test_msys_down_with_axes_down_in_the_mcs_is_applied(tmp_path: Path) -> None:
+    """The variable-contour case: every axis down in the MCS; mapped by MSYS (tip = o + R p,
+    R's columns X = (0,1,0), Y = (1,0,0), Z = X x Y = (0,0,-1)) the tool points up."""
+    tp = read(tmp_path, _nx_msys_down(-1.0))
+    np.testing.assert_allclose(tp.axis, np.tile([0.0, 0.0, 1.0], (10, 1)), atol=1e-12)
+    x = 3.0
+    np.testing.assert_allclose(tp.tip[3], [10 + 0.5 * x, 20 + x, 30 + 5.0], atol=1e-12)
+    [warning] = [w for w in tp.warnings if "frames read as apply" in w]
+    assert "--frame local overrides" in warning and "100%" in warning
+    assert len(tp.notes) == 1 and tp.notes[0].startswith("FRAMES READ AS APPLY")
+    forced = read(tmp_path, _nx_msys_down(-1.0), frame="local")  # --frame is obeyed, and says what would fit
+    np.testing.assert_allclose(forced.axis[:, 2], -1.0)
+    assert forced.frame_hint == "--frame apply" and any("with --frame apply it points away" in w
+                                                          for w in forced.warnings)
+
+
+def test_a_header_records_the_frame_choice(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    path = tmp_path / "down.cls"
+    path.write_text(_nx_msys_down(-1.0).replace("TOOL PATH/OP,TOOL,EM10", "TOOL PATH/OP,TOOL,EM10\nLOAD/TOOL,1"))
+    out = tmp_path / "down.nc"
+    result = CliRunner().invoke(main, [str(path), "-o", str(out), "--work-offset", "auto", "--tool-length", "60",
+                                       "--no-timing", "-q"])
+    assert result.exit_code == 0, result.stderr
+    assert "(CL READING FRAMES READ AS APPLY: THE TOOL AXES POINT AWAY FROM THE TABLE" in out.read_text()
+
+
+# --------------------------------------------------------------------------- rotary indexing (ROTATE)
+
+
+def _rx(degrees: float) -> np.ndarray:
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def test_pro_engineer_rotate_indexes_between_subroutine_calls(tmp_path: Path) -> None:
+    """As Pro/ENGINEER writes a 4-axis index pattern: the subroutine's points are written in the
+    part turned by the table; in the part frame the k-th call's points are R(-t_k) m, t_k the
+    angle after k increments of -36 degrees about X."""
+    body = "DEFSUB/1\nRAPID\nGOTO / 10, 0, 50, 0, 0, 1\nGOTO / 10, 0, 40\nGOTO / 20, 0, 40\nENDSUB\n"
+    calls = "CALSUB/1\n" + "ROTATE / AAXIS, INCR, -36.000000, CCLW\nCALSUB/1\n" * 2
+    tp = read(tmp_path, CREO_HEAD + body + calls)
+    m = np.array([[10.0, 0, 50], [10, 0, 40], [20, 0, 40]])
+    expected = np.vstack([m @ _rx(36.0 * k).T for k in range(3)])
+    np.testing.assert_allclose(tp.tip, expected, atol=1e-9)
+    np.testing.assert_allclose(tp.axis, np.vstack([np.tile(_rx(36.0 * k) @ [0, 0, 1], (3, 1)) for k in range(3)]),
+                               atol=1e-12)
+    assert tp.rapid[[0, 3, 6]].all()
+
+
+def test_rotate_atangl_sets_the_angle_and_clw_only_says_the_way_round(tmp_path: Path) -> None:
+    text = APT_HEAD + ("GOTO/0,10,0,0,0,1\nROTATE/AAXIS,ATANGL,90,CLW\nGOTO/0,10,0,0,0,1\n"
+                       "ROTATE/AAXIS,INCR,90,CCLW\nGOTO/0,10,0,0,0,1\nROTATE/AAXIS,ATANGL,0\nGOTO/0,10,0,0,0,1\n")
+    tp = read(tmp_path, text)
+    np.testing.assert_allclose(tp.tip, [[0, 10, 0], [0, 0, -10], [0, -10, 0], [0, 10, 0]], atol=1e-9)
+    np.testing.assert_allclose(tp.axis, [[0, 0, 1], [0, 1, 0], [0, 0, -1], [0, 0, 1]], atol=1e-12)
+
+
+@pytest.mark.parametrize("record", ["ROTATE/AAXIS,ABSOL,90", "ROTATE/90", "ROTATE/AAXIS,BAXIS,90",
+                                    "ROTATE/CAXIS,INCR,10,20"])
+def test_rotate_forms_not_documented_are_refused(tmp_path: Path, record: str) -> None:
+    e = refused(tmp_path, APT_HEAD + f"GOTO/0,0,0\n{record}\nGOTO/0,0,0\n")
+    assert e.line == 4 and "only ROTATE/AAXIS|BAXIS|CAXIS" in e.reason
+
+
+def test_catia_positional_cycle_with_empty_fields_is_refused_with_its_reason(tmp_path: Path) -> None:
+    """CATIA's cycle syntax comes from the PP word table of its machine (Dassault, "PP Tables and PP
+    Word Syntaxes"), which the APT file does not carry: the continued record (its continuation
+    line starting with a comma) is read whole, and refused as what it is, not as a bad number."""
+    text = CATIA_HEAD + ("FEDRAT/100,MMPM\nGOTO/0,0,10,0,0,1\nCYCLE/DRILL, 35.000000,,0,0, 1.000000, 1000.000000$\n"
+                         ",   70.000000,ON,0,0,0\nGOTO/0,0,0,0,0,1\nCYCLE/OFF\n")
+    e = refused(tmp_path, text)
+    assert e.line == 7 and "PP word table" in e.reason and "empty field in CYCLE" not in e.reason

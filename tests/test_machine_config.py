@@ -59,7 +59,6 @@ def test_tool_length_changes_delta() -> None:
         (lambda d: d["pole"].update(max_theta2_rate=float("nan")), "pole.max_theta2_rate: Input should be a finite"),
         (lambda d: d["tools"][1].update(length=float("inf")), "tools.1.length: Input should be a finite number"),
         (lambda d: d.update(work_offset=[0, 0, float("-inf")]), "work_offset.2: Input should be a finite number"),
-        (lambda d: d["geometry"].update(L1=10**400), "geometry.L1"),
         (lambda d: d["geometry"].update(da=1e9), "geometry.da: Input should be less than or equal to 100000"),
         (lambda d: d["joints"]["rho1"].update(velocity=1e-12), "joints.rho1.velocity: Input should be greater"),
         (lambda d: d["joints"]["rho1"].update(jerk=1e300), "joints.rho1.jerk: Input should be less than"),
@@ -104,6 +103,11 @@ def _shipped_text() -> str:
      "e: [*d, *d, *d, *d, *d, *d, *d, *d, *d, *d]\n", None, "more than 100000 values (aliases expanded)"),
     ("&a [*a]\n", 1, "more than 100000 values"),
     (_shipped_text() + "#" * (1 << 20), None, "machine file larger than 1048576 bytes"),
+    # an integer beyond Python's 4,300-digit conversion limit, and a float as long
+    (_shipped_text().replace("L1: 849.97", "L1: " + "9" * 5000), 12, "a number of 5000 characters (at most 100)"),
+    (_shipped_text().replace("L1: 849.97", "L1: 0." + "9" * 5000), 12, "a number of 5002 characters"),
+    ("a: [1, 2, -" + "1" * 101 + "]\n", 1, "a number of 102 characters"),
+    (_shipped_text().replace("L1: 849.97", f"L1: {10**400}"), 12, "a number of 401 characters"),  # beyond any float
 ])
 def test_malformed_machine_yaml(tmp_path: Path, text: str, line: int | None, message: str) -> None:
     path = _write(tmp_path, text)

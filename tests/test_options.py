@@ -134,3 +134,18 @@ def test_timed_csv_rows_are_bounded(tmp_path: Path) -> None:
     assert result.exit_code == 2, result.stderr
     assert result.stderr.startswith(f"verne-post: error: {target}: the timed CSV would have ")
     assert "--period" in result.stderr and not target.exists()
+
+
+def test_a_file_without_feed_needs_and_takes_feed(tmp_path: Path) -> None:
+    """No FEDRAT at all (NCL's APT source): the error names --feed; with it the program is
+    posted at that feed and the header says where it came from."""
+    source = tmp_path / "nofeed.cls"
+    source.write_text(HEADER.replace("FEDRAT/MMPM,1000\n", "") + GOOD)
+    target = tmp_path / "nofeed.nc"
+    result = CliRunner().invoke(main, [str(source), "-o", str(target), "--quiet"])
+    assert result.exit_code == 2 and "--feed" in result.stderr and len(result.stderr.splitlines()) == 1
+    assert not target.exists()
+    result = CliRunner().invoke(main, [str(source), "-o", str(target), "--feed", "750", "--quiet"])
+    assert result.exit_code == 0, result.stderr
+    text = target.read_text()
+    assert "(CL READING FEED 750 MM/MIN FROM --feed FOR THE 3 FEED MOVES BEFORE THE FIRST FEDRAT" in text

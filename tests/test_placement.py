@@ -195,3 +195,57 @@ def test_headroom_is_negative_exactly_where_a_check_fails(machine: vp.Machine) -
     assert reachable.sum() > 5000 and (status == Status.OK).sum() > 2000
     assert np.array_equal(value[reachable] >= 0, status[reachable] == Status.OK)
     assert np.all(value[~reachable] < 0)
+
+
+def test_every_reader_option_of_check_is_an_option_of_place() -> None:
+    """Every keyword of the CL reader has its option on 'check', and 'place' (and the other
+    commands that read a CL file) take each of them: they share one group."""
+    import inspect
+
+    from verne_post.cl import read_cl
+
+    flags = {"units": "--units", "chordal_tolerance": "--arc-tol", "arc_direction": "--arc-direction",
+             "frame": "--frame", "feed": "--feed"}
+    keywords = [name for name, p in inspect.signature(read_cl).parameters.items() if p.kind is p.KEYWORD_ONLY]
+    assert set(keywords) <= set(flags), "a reader keyword without its option here"
+    wanted = {flags[name] for name in keywords}
+
+    def options(command: str) -> set[str]:
+        return {o for p in main.commands[command].params for o in p.opts}
+
+    assert wanted <= options("check")
+    for command in ("place", "post", "batch", "toolpath"):
+        assert wanted <= options(command), command
+
+
+def test_place_reads_with_the_frame_it_is_given(tmp_path: Path) -> None:
+    """An NX MCS whose Z points down in the absolute frame, tool axes down in the MCS: read in
+    the MCS the tool is upside down and no offset works; mapped by MSYS (--frame apply) the
+    tool points up and the part is placed."""
+    rows = [f"GOTO/{x:.3f},0.000,-20.000,0.000000,0.000000,-1.000000" for x in np.linspace(0.0, 40.0, 20)]
+    path = tmp_path / "down.cls"
+    path.write_text("\n".join(["TOOL PATH/DOWN,TOOL,T1", "TLDATA/MILL,10.0,0.0,60.0,0.0,0.0", "LOAD/TOOL,1",
+                               "MSYS/0,0,0,0,1,0,1,0,0", "RAPID", rows[0], "FEDRAT/MMPM,1000", *rows[1:],
+                               "END-OF-PATH", ""]))
+    code, _, err = run("place", str(path), "--frame", "local", "-q")
+    assert code == 3 and "tilted 180.0 deg" in err, err
+    assert "(with --frame apply the tool axes point away from the table)" in err  # which --frame would
+    for frame in (["--frame", "apply"], []):  # without --frame: the reading with the tool above the part
+        code, out, err = run("place", str(path), *frame, "-q")
+        assert code == 0, err
+        assert out.startswith("work offset ")
+
+
+def test_check_with_an_automatic_offset_fails_with_the_placement_reason_only(tmp_path: Path) -> None:
+    """Nothing can be placed: 'check --work-offset auto' says why in one error line, as 'place'
+    does, instead of checking every pose at an offset known to fail."""
+    tilt = math.radians(150.0)
+    path = _cl(tmp_path, "overtilt", [(1, 60.0, _line((0, 0, 0), (50, 0, 0), (math.sin(tilt), 0.0, math.cos(tilt)),
+                                                      n=200))])
+    _, _, placed = run("place", str(path), "-q")
+    code, _, err = run("check", str(path), "--work-offset", "auto", "-q")
+    assert code == 3
+    errors = [line for line in err.splitlines() if line.startswith("verne-post: error:")]
+    assert len(errors) == 1 and "no work offset lets the whole program run" in errors[0]
+    assert placed.split("run: ", 1)[1].strip() in errors[0]  # the reason place gives
+    assert "more violations" not in err

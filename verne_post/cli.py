@@ -35,7 +35,7 @@ from .api import (
     pose_margins,
     within_limits,
 )
-from .atomic import check_writable
+from .atomic import atomic_write, check_writable
 from .errors import InputError, UserError, one_line, quote
 from .kinematics import machine_ik_all, module_ik_all
 from .machine import MAX_TOOL_LENGTH, Machine, load_machine
@@ -190,6 +190,7 @@ def main() -> None:
     verne-post workspace -o ws.png        map of the tool-tip workspace for a tool axis
     verne-post toolpath part.cls          the toolpath as the reader understood it (CSV)
     verne-post ik / fk ...                kinematics of single poses or CSV files
+    verne-post calibrate meas.csv -o my.yaml   identify geometry and joint zeros from measured tips
     """
 
 
@@ -376,19 +377,35 @@ def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: floa
 # ----------------------------------------------------------------------------- post / check
 
 
+# How the CL file is read: one group for every command that reads one ('post', 'check', 'batch',
+# 'place', 'toolpath', 'verify --against'), so that their options cannot drift apart.
 _reader_options = [
+    click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
+    click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
+                 help="Chordal deviation of CIRCLE arcs and splines expanded into CL points, mm (adds to --tol)."),
     click.option("--arc-direction", type=click.Choice(["cw", "ccw"]), default=None,
                  help="Direction of CIRCLE arcs about their axis (default: the CAM dialect's, e.g. NX cw)."),
     click.option("--frame", type=click.Choice(["local", "world", "apply"]), default=None,
                  help="What MSYS/CSYS mean (default: the CAM dialect's): data in that frame (local), already "
                       "in one frame (world), or to be mapped by it (apply)."),
+    click.option("--feed", type=Number(1e-6, 1e7, " mm/min"), default=None, metavar="MM/MIN",
+                 help="Feed of the feed moves before the CL file's first FEDRAT, in mm/min whatever the file's "
+                      "units (for CAM output that gives no feed); recorded in the G-code header."),
 ]
-
 
 def _reader_option_group(function: Callable[..., Any]) -> Callable[..., Any]:
     for option in reversed(_reader_options):
         function = option(function)
     return function
+
+
+def _read_cl(cl_file: str, units: str | None, arc_tol: float, arc_direction: str | None, frame: str | None,
+             feed: float | None) -> Any:
+    """The CL file as the reader options say."""
+    from .cl import read_toolpath
+
+    return read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame,
+                         feed=feed)
 
 
 def _decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) -> Callable[..., Any]:
@@ -406,13 +423,10 @@ _choices_before_report = [
                  help="Part zero X Y Z in the table frame, mm (default: the machine file's); 'auto': the "
                       "offset with the most room to every limit (see 'verne-post place')."),
     click.option("--auto-offset", is_flag=True, hidden=True),
-    click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units."),
     click.option("--tol", type=TIP_TOL, default=0.005, show_default=True,
                  help="Tool tip deviation allowed between blocks, mm."),
     click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True,
                  help="Tool axis deviation allowed between blocks, degrees."),
-    click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
-                 help="Chordal deviation of CIRCLE arcs expanded into CL points, mm (adds to --tol)."),
     click.option("--rapid-tol", type=TIP_TOL, default=0.5, show_default=True,
                  help="Tool tip deviation allowed from a CL rapid's straight line, mm (never below it)."),
     click.option("--rapid-axis-tol", type=AXIS_TOL, default=0.5, show_default=True,
@@ -646,8 +660,8 @@ def batch_command(inputs: tuple[str, ...], output_dir: str, jobs: int | None, sc
     options = BatchOptions(_options_from(no_timing, auto_offset, **choices), output_format or "gcode", period,
                            not no_verify, decimals=decimals)
     files = expand_inputs(inputs)
-    if summary_path:
-        check_writable(summary_path)  # now, not after the batch
+    if summary_path and Path(summary_path).resolve().parent != Path(output_dir).resolve():
+        check_writable(summary_path)  # now, not after the batch (OUTDIR itself is made by the batch)
     show = not quiet and sys.stderr.isatty()
     stream = sys.stderr if show else io.StringIO()
     with open_executor(scheduler, jobs, stages=show) as (executor, width, stages), click.progressbar(
@@ -675,14 +689,10 @@ def batch_command(inputs: tuple[str, ...], output_dir: str, jobs: int | None, sc
 @main.command("toolpath")
 @click.argument("cl_file", metavar="PART.cls", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
-@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
-@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
-              help="Chordal deviation of arcs and splines expanded into points, mm.")
 @click.option("--quiet", "-q", is_flag=True, help="No dialect line and no warnings on stderr.")
 @_reader_option_group
 @user_errors
-def toolpath_command(cl_file: str, output: str | None, units: str | None, arc_tol: float, quiet: bool,
-                     arc_direction: str | None, frame: str | None) -> None:
+def toolpath_command(cl_file: str, output: str | None, quiet: bool, **reading: Any) -> None:
     """Write the toolpath exactly as the reader understood it, as CSV.
 
     Columns x,y,z (tool tip, mm, part frame), i,j,k (unit tool axis), feed (mm/min; empty on
@@ -690,10 +700,9 @@ def toolpath_command(cl_file: str, output: str | None, units: str | None, arc_to
     line). Arcs, helices, splines and cycles are expanded. The dialect and the conventions used
     go to stderr, to compare with the CAM system's own display.
     """
-    from .cl import read_toolpath
     from .toolpath import MOTION_KINDS
 
-    tp = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol, arc_direction=arc_direction, frame=frame)
+    tp = _read_cl(cl_file, **reading)
     if not quiet:
         click.echo(f"verne-post: {cl_file}: {tp.dialect}; {len(tp)} poses, source units {tp.units}", err=True)
         for warning in tp.warnings:
@@ -725,13 +734,10 @@ def _print_findings(verification: Verification, max_messages: int) -> None:
 @machine_option
 @click.option("--work-offset", nargs=3, type=WORK_OFFSET, default=None,
               help="Part zero X Y Z in the table frame, mm (default: the program header's, else the machine's).")
-@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
 @click.option("--tol", type=TIP_TOL, default=None,
               help="Tool tip deviation allowed, mm (default: the program header's, else 0.005).")
 @click.option("--axis-tol", type=AXIS_TOL, default=None,
               help="Tool axis deviation allowed, degrees (default: the program header's, else 0.05).")
-@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True,
-              help="Chordal deviation of CIRCLE arcs expanded into CL points, mm.")
 @click.option("--rapid-tol", type=TIP_TOL, default=None,
               help="How far a rapid may leave its CL line (never below it; with --against), or dip below the "
                    "lower of its ends (without), mm (default: the program header's, else 0.5).")
@@ -742,12 +748,11 @@ def _print_findings(verification: Verification, max_messages: int) -> None:
 @_reader_option_group
 @user_errors
 def verify_command(program: str, cl_file: str | None, machine_path: str | None,
-                   work_offset: tuple[float, float, float] | None, units: str | None, tol: float | None,
-                   axis_tol: float | None, arc_tol: float, rapid_tol: float | None, report_path: str | None,
-                   quiet: bool, max_messages: int, arc_direction: str | None, frame: str | None) -> None:
+                   work_offset: tuple[float, float, float] | None, tol: float | None, axis_tol: float | None,
+                   rapid_tol: float | None, report_path: str | None, quiet: bool, max_messages: int,
+                   **reading: Any) -> None:
     """Verify a joint-space G-code program: limits and margins along the motion, and with
     --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
-    from .cl import read_toolpath
     from .tables import write_json
     from .verify import verify_program
 
@@ -756,8 +761,7 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
         text = Path(program).read_text(encoding="utf-8", errors="replace")
     except OSError as error:
         raise InputError(f"cannot read the program: {error.strerror}", program) from None
-    against = None if cl_file is None else read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol,
-                                                         arc_direction=arc_direction, frame=frame)
+    against = None if cl_file is None else _read_cl(cl_file, **reading)
     verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
                                   tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol)
     if report_path:
@@ -779,38 +783,37 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
 @machine_option
 @click.option("--tool-length", type=TOOL_LENGTH, default=None,
               help="Tool length in mm for tools whose length neither the CL file nor the machine gives.")
-@click.option("--units", type=click.Choice(["mm", "inch"]), default=None, help="Override the CL file's units.")
 @click.option("--tol", type=TIP_TOL, default=0.005, show_default=True, help="As for 'post': tip deviation, mm.")
 @click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True, help="As for 'post': axis deviation, deg.")
-@click.option("--arc-tol", type=TIP_TOL, default=0.001, show_default=True, help="As for 'post': arc chords, mm.")
+@_reader_option_group
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the placement as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @user_errors
-def place_command(cl_file: str, machine_path: str | None, tool_length: float | None, units: str | None, tol: float,
-                  axis_tol: float, arc_tol: float, report_path: str | None, quiet: bool) -> None:
+def place_command(cl_file: str, machine_path: str | None, tool_length: float | None, tol: float, axis_tol: float,
+                  report_path: str | None, quiet: bool, **reading: Any) -> None:
     """Where to clamp the part: the work offset at which PART.cls runs with the most room to every
     limit and singularity, and how far the part may move from it and still run.
 
     Prints the offset to use with 'post --work-offset X Y Z' (or use '--work-offset auto' there).
     Exit code 3 when no offset works, with the reason.
     """
-    from .cl import read_toolpath
     from .pipeline import PostOptions
     from .placement import place
     from .poses import machine_poses
     from .tables import write_json
 
     machine = load_machine(machine_path)
-    options = PostOptions(tool_length=tool_length, units=units, tol=tol, axis_tol=axis_tol, arc_tol=arc_tol, plan=False)
-    toolpath = read_toolpath(cl_file, units=units, chordal_tolerance=arc_tol)
+    options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, **reading)
+    toolpath = _read_cl(cl_file, **reading)
     poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length)
     with _progress(PLACEMENT_STEPS, quiet) as tick:
         placement = place(machine, poses, options, progress=lambda stage: tick())
     if report_path:
         write_json(report_path, {"source": toolpath.source, "machine": machine.source, **placement.to_dict()})
     if not placement.feasible:
+        hint = f" (with {toolpath.frame_hint} the tool axes point away from the table)" if toolpath.frame_hint else ""
         click.echo(f"verne-post: error: {toolpath.source}: no work offset lets the whole program run: "
-                   f"{placement.reason}", err=True)
+                   f"{placement.reason}{hint}", err=True)
         sys.exit(3)
     x, y, z = placement.offset
     click.echo(f"work offset {x:.3f} {y:.3f} {z:.3f} mm (part zero in the table frame)")
@@ -860,3 +863,110 @@ def workspace_command(output: str, machine_path: str | None, tool_length: float,
         tips = read_toolpath(program).tip + offset
     plot_workspace(workspace(machine, tool_length=tool_length, tilt=tilt, rotary=rotary, z=level, step=step),
                    output, tips)
+
+
+# ----------------------------------------------------------------------------- calibrate
+
+
+def _parameter_names(values: tuple[str, ...]) -> tuple[str, ...]:
+    from .calibration import PARAMETERS
+
+    names = tuple(name.strip() for value in values for name in value.split(",") if name.strip())
+    for name in names:
+        if name not in PARAMETERS:
+            raise InputError(f"--fix: unknown parameter {quote(name)} (one of {', '.join(PARAMETERS)})")
+    return names
+
+
+def _tool_lengths(text: str | None, machine: Machine) -> list[float]:
+    if text is None:
+        lengths = sorted({tool.length for tool in machine.tools.values()})
+        return lengths or [0.0]
+    lengths = []
+    for cell in text.split(","):
+        lengths.append(TOOL_LENGTH.convert(cell.strip(), None, None))
+    return lengths
+
+
+@main.command("calibrate")
+@click.argument("measured", metavar="MEASURED.csv", required=False, type=click.Path(dir_okay=False))
+@machine_option
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The calibrated machine file (YAML); with --plan the poses to measure (CSV).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False),
+              help="Report: JSON, or HTML when the name ends in .html/.htm.")
+@click.option("--fix", multiple=True, metavar="NAME[,NAME...]",
+              help="Hold parameters at their machine-file values (repeatable): geometry keys, rhoN_offset, "
+                   "thetaN_offset.")
+@click.option("--reject", is_flag=True, help="Drop the poses flagged as outliers and fit again.")
+@click.option("--plan", "plan_count", type=Number(1, 100_000, integer=True),
+              help="Suggest this many poses to measure (D-optimal, every limit and margin checked) instead.")
+@click.option("--tools", help="With --plan: tool lengths in mm, comma-separated (default: the machine's tool table).")
+@click.option("--seed", type=Number(0, 2**32 - 1, integer=True), default=0, show_default=True,
+              help="With --plan: seed of the candidate poses.")
+@user_errors
+def calibrate_command(measured: str | None, machine_path: str | None, output: str, report_path: str | None,
+                      fix: tuple[str, ...], reject: bool, plan_count: int | None, tools: str | None,
+                      seed: int) -> None:
+    """Identify the machine's geometry and joint zeros from measured tool-tip positions.
+
+    \b
+    MEASURED.csv: rho1,rho2,rho3,theta1,theta2,tool_length,x,y,z[,i,j,k][,weight]
+    (joint readings mm/deg, tool length mm, measured tip mm in the table frame).
+    Writes the machine file with the identified values and a calibration: block.
+    'verne-post calibrate --plan N -o poses.csv' suggests the poses to measure.
+    """
+    from .calibration import calibrate, calibrated_text, plan_poses, read_measurements, report_data
+    from .calibration.measurements import check_pose_count
+    from .calibration.model import PARAMETERS, parameters_of
+    from .calibration.report import report_html, report_json
+    from .machine import machine_text
+
+    names = _parameter_names(fix)
+    machine = load_machine(machine_path)
+    if plan_count is not None:
+        if measured is not None:
+            raise InputError("--plan writes poses to measure: give no MEASURED.csv with it")
+        _check_outputs(machine_path or "", output)
+        plan = plan_poses(machine, int(plan_count), _tool_lengths(tools, machine), names, int(seed))
+        table = {"rho1": plan.joints[:, 0], "rho2": plan.joints[:, 1], "rho3": plan.joints[:, 2],
+                 "theta1": np.degrees(plan.joints[:, 3]), "theta2": np.degrees(plan.joints[:, 4]),
+                 "tool_length": plan.tool_length, "x_nominal": plan.tip[:, 0], "y_nominal": plan.tip[:, 1],
+                 "z_nominal": plan.tip[:, 2]}
+        write_table(output, table, dict.fromkeys(table, "%.4f"))
+        click.echo(f"{len(plan.joints)} poses written to {output} (measure the tip there; x,y,z_nominal is where "
+                   f"the machine file puts it)")
+        for name, why in plan.held.items():
+            click.echo(f"held: {name}: {why}")
+        if plan.std_per_um:
+            worst = max(plan.std_per_um, key=plan.std_per_um.get)
+            click.echo(f"expected std per um of measuring noise: worst {worst} {plan.std_per_um[worst] * 1e3:.2f} um")
+        return
+    if measured is None:
+        raise InputError("give MEASURED.csv (or --plan N to plan the measurements)")
+    _check_outputs(measured, output, report_path)
+    if machine_path is not None and _same_file(output, machine_path):
+        raise InputError("the output would overwrite the machine file it starts from", output)
+    measurements = read_measurements(measured, machine)
+    check_pose_count(measurements, len(PARAMETERS) - len(set(names)))
+    result = calibrate(parameters_of(machine), measurements.poses, names, reject)
+    text = calibrated_text(machine_text(machine_path), result, measured, output)
+    report = None
+    if report_path is not None:
+        data = report_data(result, measurements, machine.source)
+        report = report_html(data) if report_path.lower().endswith((".html", ".htm")) else report_json(data)
+    # Everything is computed before the first byte is written; UTF-8: a machine file may hold any text.
+    with atomic_write(output, binary=True) as handle:
+        handle.write(text.encode("utf-8"))
+    if report is not None:
+        with atomic_write(report_path, binary=True) as handle:
+            handle.write(report.encode("utf-8"))
+    s = result.summary()
+    click.echo(f"{int(result.used.sum())} poses: tool-tip residual RMS {s['rms_before'] * 1e3:.1f} um (max "
+               f"{s['max_before'] * 1e3:.1f}) -> {s['rms_after'] * 1e3:.2f} um (max {s['max_after'] * 1e3:.2f})")
+    for name, why in result.reasons.items():
+        click.echo(f"held: {name}: {why}")
+    flagged = measurements.lines[result.outlier]
+    if flagged.size:
+        verb = "dropped" if reject else "flagged (use --reject to drop)"
+        click.echo(f"outliers {verb}: {measured} lines {', '.join(str(int(x)) for x in flagged)}")

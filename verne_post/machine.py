@@ -41,6 +41,11 @@ class Geometry:
 
     ``delta`` = ``spindle_nose`` + ``tool_length``. Only the differences D1-d1 and D2-d2 enter
     the closure equations (paper eq. 3-5).
+
+    ``rho_offset`` (mm) and ``theta_offset`` (rad) are the joint zero offsets: the true joint
+    position is the controller's reading plus the offset. Every public kinematics function
+    takes and returns joint *readings*; the offsets are applied inside (all zero: the
+    readings are the true positions, and no arithmetic is done on them at all).
     """
 
     D1_minus_d1: float
@@ -56,6 +61,33 @@ class Geometry:
     da: float
     dt: float
     tool_length: float = 0.0
+    rho_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    theta_offset: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def has_offsets(self) -> bool:
+        """True where any joint zero offset is non-zero."""
+        return any(self.rho_offset) or any(self.theta_offset)
+
+    def _offsets(self, width: int) -> np.ndarray:
+        return np.array((*self.rho_offset, *self.theta_offset)[:width], dtype=float)
+
+    def true_joints(self, joints: np.ndarray) -> np.ndarray:
+        """True joint positions from readings (N, 3) rho mm or (N, 5) rho mm, theta rad.
+
+        Returns ``joints`` itself when every offset is zero (outputs stay bit-identical).
+        """
+        if not self.has_offsets:
+            return joints
+        joints = np.asarray(joints, dtype=float)
+        return joints + self._offsets(joints.shape[-1])
+
+    def readings(self, joints: np.ndarray) -> np.ndarray:
+        """Controller readings from true joint positions, (N, 3) or (N, 5); inverse of :meth:`true_joints`."""
+        if not self.has_offsets:
+            return joints
+        joints = np.asarray(joints, dtype=float)
+        return joints - self._offsets(joints.shape[-1])
 
     @property
     def delta(self) -> float:
@@ -112,13 +144,24 @@ class GeometryConfig(BaseModel):
                          f"reachable in the working mode: {why}")
 
 
+#: Largest joint zero offset (mm for a slider, degrees for a rotary): a calibration corrects
+#: assembly errors, not a misplaced axis.
+MAX_OFFSET = 100.0
+
+
 class JointLimits(BaseModel):
-    """One joint: position range (mm or degrees) and its velocity/acceleration/jerk limits (per s)."""
+    """One joint: position range (mm or degrees) and its velocity/acceleration/jerk limits (per s).
+
+    ``offset`` (mm or degrees, default 0): the true position is the controller's reading plus
+    the offset (a slider's or rotary's zero error, found by ``verne-post calibrate``). The
+    limits ``min``/``max`` are on the readings, as the controller's soft limits are.
+    """
 
     model_config = _STRICT
     min: Finite | None = None
     max: Finite | None = None
     continuous: bool = False
+    offset: Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)] = 0.0
     velocity: Velocity
     acceleration: Acceleration
     jerk: Jerk
@@ -226,6 +269,23 @@ class SafeConfig(BaseModel):
     rapid_feed: Annotated[float, Field(ge=1.0, le=1e8)] | None = None
 
 
+class CalibrationRecord(BaseModel):
+    """Provenance of a calibrated machine file, written by ``verne-post calibrate`` (no date:
+    the same measurements give the same file). Residuals in mm, table frame."""
+
+    model_config = _STRICT
+    method: Annotated[str, Field(min_length=1, max_length=200)]
+    measurements: Annotated[str, Field(min_length=1, max_length=400)]
+    poses: Annotated[int, Field(ge=1)]
+    rejected: Annotated[int, Field(ge=0)] = 0
+    rms_before: Annotated[float, Field(ge=0)]
+    max_before: Annotated[float, Field(ge=0)]
+    rms_after: Annotated[float, Field(ge=0)]
+    max_after: Annotated[float, Field(ge=0)]
+    fitted: list[Annotated[str, Field(max_length=40)]] = Field(default_factory=list, max_length=64)
+    held: list[Annotated[str, Field(max_length=40)]] = Field(default_factory=list, max_length=64)
+
+
 class Machine(BaseModel):
     """A whole machine file. Lengths mm, angles degrees (as written in the YAML)."""
 
@@ -241,6 +301,7 @@ class Machine(BaseModel):
     timing: TimingConfig = TimingConfig()
     safe: SafeConfig = SafeConfig()
     positions: Positions = Positions()
+    calibration: CalibrationRecord | None = None
     _source: str = PrivateAttr(default="verne.yaml")
 
     @model_validator(mode="after")
@@ -262,8 +323,11 @@ class Machine(BaseModel):
         return self._source
 
     def kinematic_geometry(self, tool_length: float = 0.0) -> Geometry:
-        """The :class:`Geometry` for the kinematics with the given tool length (mm)."""
-        return Geometry(**self.geometry.model_dump(), tool_length=float(tool_length))
+        """The :class:`Geometry` for the kinematics with the given tool length (mm), joint offsets in mm and rad."""
+        j = self.joints
+        return Geometry(**self.geometry.model_dump(), tool_length=float(tool_length),
+                        rho_offset=(j.rho1.offset, j.rho2.offset, j.rho3.offset),
+                        theta_offset=(math.radians(j.theta1.offset), math.radians(j.theta2.offset)))
 
     @property
     def geom(self) -> Geometry:
@@ -289,6 +353,11 @@ def _format_validation_error(error: ValidationError) -> str:
 MAX_FILE_BYTES = 1 << 20
 MAX_DEPTH = 16
 MAX_VALUES = 100_000
+#: Characters of one number: far more than any float's 17 significant digits and exponent. A
+#: longer one is a mistake (and an integer of more than 4,300 digits would make Python's int()
+#: raise its own ValueError).
+MAX_NUMBER_CHARS = 100
+_NUMBER_TAGS = frozenset({"tag:yaml.org,2002:int", "tag:yaml.org,2002:float"})
 
 
 class _MachineLoader(yaml.SafeLoader):
@@ -336,13 +405,17 @@ def _parse_yaml(text: str, source: str) -> object:
 
 
 def _count_values(root: yaml.Node, source: str) -> None:
-    """Refuse more than :data:`MAX_VALUES` values counting every alias use (an alias bomb)."""
+    """Refuse more than :data:`MAX_VALUES` values counting every alias use (an alias bomb), and
+    numbers longer than :data:`MAX_NUMBER_CHARS` characters."""
     stack, count = [root], 0
     while stack:
         node = stack.pop()
         count += 1
         if count > MAX_VALUES:
             raise InputError(f"more than {MAX_VALUES} values (aliases expanded)", source, node.start_mark.line + 1)
+        if isinstance(node, yaml.ScalarNode) and node.tag in _NUMBER_TAGS and len(node.value) > MAX_NUMBER_CHARS:
+            raise InputError(f"a number of {len(node.value)} characters (at most {MAX_NUMBER_CHARS})", source,
+                             node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             stack.extend(child for pair in node.value for child in pair)
         elif isinstance(node, yaml.SequenceNode):
@@ -367,6 +440,22 @@ def load_machine(path: str | Path | None = None) -> Machine:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("machine file is not UTF-8 text", source) from None
+    return machine_from_text(text, source)
+
+
+def machine_text(path: str | Path | None = None) -> str:
+    """The text of a machine file (``None``: the shipped VERNE), for tools that edit it."""
+    if path is None:
+        return (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_text(encoding="utf-8")
+    try:
+        with open(path, encoding="utf-8") as handle:
+            return handle.read(MAX_FILE_BYTES + 1)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read machine file: {getattr(exc, 'strerror', None) or exc}", str(path)) from None
+
+
+def machine_from_text(text: str, source: str) -> Machine:
+    """Parse and validate the text of a machine file (``source`` names it in messages)."""
     data = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)

@@ -72,6 +72,7 @@ class PostOptions:
     arc_tol: float = 0.001  # mm: chordal deviation of CIRCLE arcs expanded into CL points
     arc_direction: Literal["cw", "ccw"] | None = None  # override the CL dialect's arc direction
     frame: Literal["local", "world", "apply"] | None = None  # override the CL dialect's frame reading
+    feed: float | None = None  # mm/min: the feed of feed moves before the CL file's first FEDRAT
     plan: bool = True  # time-parametrise (TOPP2, ruckig); False: feeds from the programmed feed only
     planner: Engine = "copp"  # TOPP2 engine of the feed moves (verne_post.topp): copp-py, or toppra the reference
     optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.third_order)
@@ -607,7 +608,7 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
                    ) -> tuple[MachinePoses, PostOptions, Placement | None]:
     """Stages 1 and 2: the CL file read, the work offset placed, the poses in the table frame."""
     toolpath = read_toolpath(path, units=options.units, chordal_tolerance=options.arc_tol,
-                             arc_direction=options.arc_direction, frame=options.frame)
+                             arc_direction=options.arc_direction, frame=options.frame, feed=options.feed)
     clock.lap("parse")
     placement = None
     if options.work_offset == "auto":
@@ -748,7 +749,12 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     in_cone = False
     failed = placement is not None and not placement.feasible
     helped = planner is not plan_timing
-    parts = _parts(machine, poses, options, part_poses, clock.lap, options.plan and not failed, planner, timing_figures)
+    # No work offset runs the program: the placement's one-line reason is the answer, as 'place'
+    # gives it; checking every part at an offset known to fail took minutes and printed
+    # thousands of violations that say the same.
+    parts = iter(()) if failed else _parts(machine, poses, options, part_poses, clock.lap, options.plan, planner,
+                                          timing_figures)
+    k = -1
     with _spool(output) as spool:
         for k, part in enumerate(_one_ahead(parts) if helped else parts):
             timed = part.timed(wanted=not failed)  # a part after a failed one: as if not planned
@@ -833,6 +839,7 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         f"MACHINE {machine.source} ({machine.name})",
         f"SOURCE {Path(poses.source).name}",
         f"CL DIALECT {poses.dialect}",
+        *(f"CL READING {note}" for note in poses.notes),
         "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (

@@ -48,6 +48,7 @@ class MachinePoses:
     tools: tuple[ToolUse, ...]  # in load order
     warnings: tuple[str, ...]
     dialect: str = "CSV poses"  # the CL dialect and conventions the reader applied
+    notes: tuple[str, ...] = ()  # the reader's choices for the program header (Toolpath.notes)
 
     def __len__(self) -> int:
         return len(self.tip)
@@ -116,5 +117,5 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
         source=toolpath.source, part_name=toolpath.part_name, tip=toolpath.tip + offset, axis=toolpath.axis,
         line=toolpath.line, rapid=toolpath.rapid, feed=toolpath.feed, inverse_time=toolpath.inverse_time,
         tool=toolpath.tool, tool_length=lengths, sequence=np.cumsum(boundary) - 1, events=toolpath.events,
-        tools=tuple(tools), warnings=toolpath.warnings, dialect=toolpath.dialect,
+        tools=tuple(tools), warnings=toolpath.warnings, dialect=toolpath.dialect, notes=toolpath.notes,
     )

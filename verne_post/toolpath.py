@@ -104,6 +104,8 @@ class Toolpath:
     warnings: tuple[str, ...] = field(default=())
     dialect: str = "CSV poses"  # the CAM dialect and conventions the reader applied
     motion: np.ndarray | None = None  # (N,) int8: how pose k is reached, an index into MOTION_KINDS
+    notes: tuple[str, ...] = ()  # choices the reader made from options or by rule, for the program header
+    frame_hint: str | None = None  # the --frame under which the tool would point away from the table, if not this
 
     def __len__(self) -> int:
         return int(self.tip.shape[0])

@@ -10,18 +10,30 @@ the level of the tool's position when the cycle was defined or re-activated (G98
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
 
 from . import cycles
 from .curves import no_pending_curve
+from .dialects import DIALECTS
 from .lexer import Record
 from .machine_functions import dwell_event, feed_from
 from .state import ReaderState
 
 
 def cycle(st: ReaderState, rec: Record) -> None:
+    if st.dialect.name == DIALECTS["catia"].name and re.search(r",\s*,", rec.args):
+        # CATIA writes a cycle with the syntax of the PP word table its machine uses (Dassault, NC
+        # Manufacturing, "PP Tables and PP Word Syntaxes": the table's syntaxes, e.g.
+        # CYCLE/TAP,%MFG_TOTAL_DEPTH,%MFG_CLEAR_TIP, are resolved into the APT output), with an empty
+        # field for a parameter without a value. The APT file does not carry that table, so which
+        # number is the depth, the clearance or the feed cannot be known from it.
+        raise st.fail(f"CYCLE/{rec.args.split(',')[0].strip()[:20]}: CATIA's positional cycle (fields and empty fields "
+                      "as the PP word table of its machine defines them, which the APT file does not carry): the "
+                      "depth, clearance and feed cannot be told apart; output the cycle with a PP table whose syntax "
+                      "names them (CYCLE/DRILL,DEPTH,d,CLEAR,c,MMPM,f) or as GOTO moves", rec.line)
     toks = st.tokens(rec.args, "CYCLE", rec.line)
     if not toks or not isinstance(toks[0], str):
         raise st.fail("CYCLE needs a cycle type (e.g. CYCLE/DRILL or CYCLE/OFF)", rec.line)

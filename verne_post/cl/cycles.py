@@ -303,7 +303,15 @@ def _spec(
     if any(p <= 0 for p in pecks):
         raise ValueError(f"CYCLE/{name} peck depths must be positive, got {min(pecks):g}")
     if kind in ("deep", "brkchp") and not pecks:
-        raise ValueError(f"CYCLE/{name} needs a peck depth (STEP, INCR or 1STPECK)")
+        # NX's DEEP / BRKCHP without STEP: NX Post Builder's simulated cycles
+        # (PB_CMD_sim_cycle_drill_deep_move, _break_chip_move) start at deep_depth = -step1 = 0 and
+        # peck while feed_to < deep_depth, stepping by step1: a feed to the point itself (FEDTO,0,
+        # NX's countersink) is one feed; any depth below it is never reached without a step.
+        if depth > 1e-9 * max(1.0, *(abs(v) for v in seen.values())):
+            raise ValueError(f"CYCLE/{name} pecks to {depth:g} below the point but gives no peck depth (STEP, "
+                             "INCR or 1STPECK): NX's own cycle pecks by the step and never gets below the point "
+                             "without one")
+        kind = "drill"  # one feed to the point, as NX's simulated cycle makes it
     if kind not in ("deep", "brkchp") and pecks:
         raise ValueError(f"CYCLE/{name} does not peck but gives peck depths")
     if "BACK" in seen and kind != "brkchp":

@@ -96,4 +96,58 @@ def trntyp(st: ReaderState, rec: Record) -> None:
         st.warn(rec.line, f"TRNTYP/{words[0][:40]}: only TRNTYP/WORLD is known; the data are read as they are")
 
 
-HANDLERS = {"MSYS": msys, "CSYS": csys, "ORIGIN": origin, "TRNTYP": trntyp}
+_ROTARY_AXES = {"AAXIS": 0, "BAXIS": 1, "CAXIS": 2}
+
+
+def _rotation(axis: int, degrees: float) -> np.ndarray:
+    """The right-handed rotation by ``degrees`` about coordinate axis ``axis`` (0 X, 1 Y, 2 Z)."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    j, k = (axis + 1) % 3, (axis + 2) % 3
+    r = np.eye(3)
+    r[j, j], r[j, k], r[k, j], r[k, k] = c, -s, s, c
+    return r
+
+
+def rotate(st: ReaderState, rec: Record) -> None:
+    """``ROTATE/AAXIS|BAXIS|CAXIS[,INCR|ATANGL],angle[,CLW|CCLW]``: a rotary index of the part
+    (Pro/ENGINEER writes ``ROTATE / AAXIS, INCR, -36.000000, CCLW`` between subroutine calls, each
+    followed by the rotated frame as a ``$$-> CSYS`` comment). The CL data after it are written in
+    the frame of the part so turned; they are taken back into the part frame, as the posts of NX,
+    Creo and Vericut do with a table index: with the table at angle t (right-handed about the
+    axis through the CL origin), a point written at m is the part's point R(-t) m.
+
+    The fields are those of NX's Rotate event (NX Post Builder, ``pblib/ude.cdl``, EVENT rotate: the
+    axis Aaxis|Baxis|Caxis, the type Absolute|Incremental, the direction CLW|CCLW and the angle as
+    separate parameters). ``ATANGL`` (the default) sets the angle, ``INCR`` adds to it;
+    ``CLW``/``CCLW`` say which way round the table turns to get there, which changes where the data
+    lie not at all (the move between is a retract, an index and an approach). Any other form is
+    refused.
+    """
+    toks = st.tokens(rec.args, "ROTATE", rec.line)
+    words = [t for t in toks if isinstance(t, str)]
+    numbers = [t for t in toks if isinstance(t, float)]
+    axes = [w for w in words if w in _ROTARY_AXES]
+    modes = [w for w in words if w in ("INCR", "ATANGL")]
+    unknown = [w for w in words if w not in _ROTARY_AXES and w not in ("INCR", "ATANGL", "CLW", "CCLW")]
+    if len(axes) != 1 or len(modes) > 1 or len(numbers) != 1 or unknown or words.count("CLW") + words.count("CCLW") > 1:
+        raise st.fail(f"ROTATE/{rec.args.strip()[:40]}: only ROTATE/AAXIS|BAXIS|CAXIS,[INCR|ATANGL],angle,[CLW|CCLW] "
+                      "(a rotary index) is documented", rec.line)
+    if abs(numbers[0]) > 36000.0:
+        raise st.fail(f"ROTATE angle {numbers[0]:g} deg is absurd", rec.line)
+    axis = _ROTARY_AXES[axes[0]]
+    if st.index is None or st.index[0] != axis:
+        if st.index is not None and st.index[2] % 360.0:
+            raise st.fail(f"ROTATE about {axes[0]} while the part is indexed about another axis: an index about two "
+                          "rotary axes is not supported", rec.line)
+        st.index = (axis, st.frame_id, 0.0)
+    _axis, base, angle = st.index
+    angle = angle + numbers[0] if modes == ["INCR"] else numbers[0]
+    st.index = (axis, base, angle)
+    R0, o0 = st.frames[base]
+    st.frames.append((R0 @ _rotation(axis, -angle), o0))
+    st.frame_id = len(st.frames) - 1
+    st.frame_declared = True
+    st.push_state()
+
+
+HANDLERS = {"MSYS": msys, "CSYS": csys, "ORIGIN": origin, "TRNTYP": trntyp, "ROTATE": rotate}

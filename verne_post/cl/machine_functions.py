@@ -66,6 +66,8 @@ def fedrat(st: ReaderState, rec: Record) -> None:
         raise st.fail(f"FEDRAT: unknown feed unit '{unit[:40]}' (expected MMPM, IPM, FPM, PERMIN, MMPR, IPR, FPR, "
                       "PERREV or INVERS)", rec.line)
     value = nums[0]
+    if st.first_fedrat is None:
+        st.first_fedrat = len(st.lines)
     st.fpr = None
     st.inverse = False
     if unit == "INVERS":
@@ -119,7 +121,8 @@ def spindl(st: ReaderState, rec: Record) -> None:
         elif t in ("RANGE", "MAXRPM"):
             i += 1  # its value is not a speed
         elif t in ("SFM", "SMM"):
-            raise st.fail(f"SPINDL/{t} (constant surface speed) is not supported; program RPM", rec.line)
+            raise st.fail(f"SPINDL/{t} (constant surface speed, a lathe's spindle mode) is not supported; program "
+                          "RPM", rec.line)
         elif t != "RPM":
             raise st.fail(f"SPINDL: unknown word '{t[:40]}'", rec.line)
         i += 1
@@ -242,12 +245,30 @@ def head(st: ReaderState, rec: Record) -> None:
     Commands") would merge another head's motion into this one's."""
     toks = st.tokens(rec.args, "HEAD", rec.line)
     if toks and (toks[0] == "BOTH" or (isinstance(toks[0], float) and toks[0] != 1.0)):
-        raise st.fail(f"HEAD/{rec.args.strip()[:40]}: motion for another head or several heads at once; this machine "
-                      "has one spindle: output head 1's CL data alone", rec.line)
+        raise st.other_machine(f"HEAD/{rec.args.strip()[:40]}: a program for a machine with several heads (motion for "
+                               "another head or several at once); the VERNE has one spindle: output head 1's CL data "
+                               "alone", rec.line)
+
+
+_TURNING = "a turning program (for a lathe); the VERNE is a milling machine and cannot turn"
+
+
+def turret(st: ReaderState, rec: Record) -> None:
+    """TURRET: a lathe's tool turret, written instead of LOADTL by lathe and mill-turn output (CATIA's
+    Lathe Machining, Creo's lathe and mill-turn workcells)."""
+    raise st.other_machine(f"TURRET/{rec.args.strip()[:40]}: {_TURNING}", rec.line)
+
+
+def mode(st: ReaderState, rec: Record) -> None:
+    """MODE/MILL or MODE/TURN: Autodesk's ISO 4343 APT posts open with the machining mode;
+    ``MODE/TURN`` is a turning program. Other MODE records change nothing here."""
+    words = [w.strip().upper() for w in rec.args.split(",")]
+    if words and words[0] in ("TURN", "LATHE"):
+        raise st.other_machine(f"MODE/{rec.args.strip()[:40]}: {_TURNING}", rec.line)
 
 
 HANDLERS = {
     "FEDRAT": fedrat, "SPINDL": spindl, "COOLNT": coolnt, "STOP": stop, "OPSTOP": opstop, "DELAY": delay,
     "CUTCOM": cutcom, "UNITS": units, "UNIT": units, "FINI": fini, "PPRINT": text_record, "PARTNO": text_record,
-    "INSERT": text_record, "HEAD": head,
+    "INSERT": text_record, "HEAD": head, "TURRET": turret, "MODE": mode,
 }  # fmt: skip

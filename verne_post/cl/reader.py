@@ -37,7 +37,7 @@ import math
 import os
 import re
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -45,12 +45,13 @@ import numpy as np
 
 from verne_post.errors import InputError
 from verne_post.tables import read_table
-from verne_post.toolpath import Toolpath
+from verne_post.toolpath import MIN_FEED, Toolpath
 
 from . import curves, cycle_records, frames, machine_functions, motion, tools
 from .arcs import tangent_votes
-from .dialects import ArcDirection, FrameMode, detect_dialect
+from .dialects import DIALECTS, ArcDirection, FrameMode, detect_dialect
 from .lexer import GotoRun, Record, iter_lines, record_runs
+from .machine_functions import MAX_FEED
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -63,6 +64,7 @@ _FEED_UNIT_RE = re.compile(
 )
 
 Handler = Callable[[ReaderState, Record], None]
+_PP_WORD_RE = re.compile(r"[A-Z][A-Z0-9_]*\Z")  # one word, as a PP word's major word is
 HANDLERS: dict[str, Handler] = {
     **motion.HANDLERS, **curves.HANDLERS, **tools.HANDLERS, **machine_functions.HANDLERS, **frames.HANDLERS,
     **cycle_records.HANDLERS,
@@ -71,13 +73,13 @@ HANDLERS: dict[str, Handler] = {
 # Read and knowingly ignored: display, CAM-setup and bookkeeping records that change nothing the
 # machine does. NX: PAINT, DISPLY...; Creo: MACHIN, MFGNO; SolidWorks CAM: CSI_SET_* (tool
 # flute/extension lengths for its own simulation), SETUP/START|END; Makino: SET/MODE,ABSOL
-# (absolute data, the only kind there is here); HSM: MODE, AUXFUN (machine-specific codes);
+# (absolute data, the only kind there is here); HSM: AUXFUN (machine-specific codes);
 # Creo: MOVNRB, a NURBS written beside its own point-to-point GOTOs, which carry the motion (PTC
 # Creo help, "CL Output for NURBS Interpolation": MOVNRB/NEXT "indicates the start of the actual
 # point-to-point output").
 _IGNORED = frozenset({
     "PAINT", "DISPLY", "PEN", "AUTOPS", "OPERATION", "TPRINT", "PPLOT", "TOLER", "INTOL", "OUTTOL",
-    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO", "MODE",
+    "MACHIN", "SEQNO", "END-OF-PATH", "END", "PLABEL", "SETUP", "SET", "MFGNO", "FEATNO",
     "AUXFUN", "OPSKIP", "MOVNRB",
 })  # fmt: skip
 _IGNORED_PREFIXES = ("CSI_SET_",)
@@ -90,8 +92,9 @@ _REJECTED = {
        for w in ("MCS", "MCSYS")},
     "INDEX": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
     "COPY": "INDEX/COPY (repeated motion) is not supported; output the motion explicitly",
+    # ROTATE's index form is read (frames.rotate); these move a rotary axis in forms not documented
     **{w: f"{w} (a rotary axis moved by the CL data) is not supported: give 5-axis tool axes in GOTO records"
-       for w in ("ROTABL", "ROTATE", "ROTHED")},
+       for w in ("ROTABL", "ROTHED")},
     "INDIRP": "INDIRP is not supported: the CL file must contain explicit GOTO points",
     **{w: f"motion record {w} is not supported: the CL file must contain explicit GOTO points"
        for w in ("GOFWD", "GOLFT", "GORGT", "GOBACK", "GOUP", "GODOWN", "GO")},
@@ -174,13 +177,66 @@ def _decide_units(text: str, override: Units | None, src: str, warnings: Warning
     return "mm"
 
 
+#: Machine-function records whose malformed form a valid one may replace before any motion: CATIA
+#: passes PP words as its user typed them (``SPINDL/900CCLW`` and, on the next line,
+#: ``SPINDL/10000,CLW``); the last valid one is what the machine would run.
+_REPLACEABLE = frozenset({"SPINDL", "FEDRAT", "COOLNT"})
+
+
+def _machine_function(st: ReaderState, rec: Record, handler: Handler) -> None:
+    """Run ``handler``; a malformed record waits (see :data:`_REPLACEABLE`) for a valid one of its
+    word before any motion, which gets a warning naming both lines; motion first is its error."""
+    try:
+        handler(st, rec)
+    except InputError as error:
+        if error.line != rec.line:
+            raise
+        if rec.word not in st.malformed:  # the first malformed one is the one a motion would report
+            st.malformed[rec.word] = (rec.line, f"{rec.word}/{rec.args.strip()}"[:60], error)
+        return
+    bad = st.malformed.pop(rec.word, None)
+    if bad is not None:
+        st.warn(bad[0], f"{bad[1]} is malformed ({bad[2].reason}); {rec.word}/{rec.args.strip()[:40]} at line "
+                f"{rec.line} replaces it before any motion: read as that")
+
+
+def pp_word(st: ReaderState, rec: Record) -> None:
+    """A CATIA PP word (``LOOP/START,15``, ``AICC/ON,10``, a bare word, ``TOOLNO/13,1``): kept for
+    one grouped warning. CATIA writes its PP table's syntaxes and its user's PP instructions into
+    the APT as they are (Dassault, NC Manufacturing, "PP Tables and PP Word Syntaxes" and the "PP
+    Instruction" operation), for a post-processor that knows them; they move nothing here."""
+    text = f"{rec.word}/{rec.args.strip()}" if rec.args.strip() else rec.word
+    st.pp_words.setdefault(text[:40], rec.line)
+
+
+def _pp_words_warning(st: ReaderState) -> None:
+    if not st.pp_words:
+        return
+    shown = sorted(st.pp_words.items(), key=lambda item: item[1])
+    listed = ", ".join(f"{text} (line {line})" for text, line in shown[:8])
+    more = f" and {len(shown) - 8} more" if len(shown) > 8 else ""
+    st.warn(shown[0][1], f"{len(shown)} post-processor words in CATIA's output (its PP table's or typed by its user), "
+            f"not CL records, ignored: {listed}{more}", kind="CATIA PP words")
+
+
 def _dispatch(st: ReaderState, rec: Record) -> None:
     if isinstance(st.curve, curves.PendingSpline) and rec.word not in ("KNOT", "CNTRL"):
         curves.finish_spline(st)
     if "," in rec.word:  # a motion statement's modifier: TLON, GOFWD -> TLON,GOFWD
         rec = rec._replace(word=re.sub(r"\s*,\s*", ",", rec.word))
     handler = HANDLERS.get(rec.word)
-    if handler is not None:
+    if rec.word == "TOOLNO" and "TURN" in (w.strip().upper() for w in rec.args.split(",")):
+        # CATIA's lathe output names its tool TOOLNO/n,TURN (Dassault, Lathe Machining user's guide,
+        # its APT sample: TOOLNO/1,TURN, FEDRAT/...,MMPR, GOTO/x,0,z)
+        raise st.other_machine(f"TOOLNO/{rec.args.strip()[:40]}: a turning tool; this is a turning program (for a "
+                               "lathe), and the VERNE is a milling machine and cannot turn", rec.line)
+    if rec.word.partition(",")[0] == "CHANNEL":
+        # CATIA's output for a multi-turret machine opens with CHANNEL,n (the same sample)
+        raise st.other_machine(f"{rec.word[:40]}: a program for one channel of a machine with several (turrets or "
+                               "heads); the VERNE has one spindle and one channel", rec.line)
+    if handler is not None and rec.word in _REPLACEABLE:
+        _machine_function(st, rec, handler)
+    elif handler is not None:
         handler(st, rec)
     elif rec.word == "$":
         raise st.fail("continuation '$' at end of file: the record is incomplete", rec.line)
@@ -191,7 +247,11 @@ def _dispatch(st: ReaderState, rec: Record) -> None:
                       "is: offset motion needs the part surfaces): output GOTO points", rec.line)
     elif rec.word in _INFORMATIONAL:
         st.warn(rec.line, _INFORMATIONAL[rec.word], kind=rec.word)
-    elif rec.word not in _IGNORED and not rec.word.startswith(_IGNORED_PREFIXES):
+    elif rec.word in _IGNORED or rec.word.startswith(_IGNORED_PREFIXES):
+        pass
+    elif st.dialect.name == DIALECTS["catia"].name and _PP_WORD_RE.match(rec.word):
+        pp_word(st, rec)
+    else:
         shown = rec.word if len(rec.word) <= 40 else rec.word[:37] + "..."
         st.warn(rec.line, f"unknown record '{shown}' ignored", kind=f"unknown {shown}")
 
@@ -320,6 +380,9 @@ def _run(st: ReaderState, recs: Iterable[Record | GotoRun], subs: _Subroutines, 
 def _parse(lines: Iterable[str], st: ReaderState) -> None:
     subs = _Subroutines()
     _run(st, record_runs(lines), subs, 0)
+    if st.malformed:  # nothing replaced it: the error, as for any record
+        st.motion_after_malformed()
+    _pp_words_warning(st)
     if subs.capturing is not None:
         raise st.fail(f"DEFSUB/{subs.capturing[0][:40]} has no ENDSUB", subs.capturing[1])
     if isinstance(st.curve, curves.PendingSpline):
@@ -355,13 +418,16 @@ def read_cl(
     chordal_tolerance: float = 0.001,
     arc_direction: ArcDirection | None = None,
     frame: FrameMode | None = None,
+    feed: float | None = None,
 ) -> Toolpath:
     """Read an APT/CLSF cutter-location file (mm, mm/min, part frame; see the module docstring).
 
     ``units`` overrides the source units; ``chordal_tolerance`` (mm) bounds the deviation of
     arcs, helices and splines expanded into poses; ``arc_direction`` (``"cw"``/``"ccw"`` about
     the CIRCLE axis) and ``frame`` (``"local"``/``"world"``/``"apply"``) override the dialect's
-    conventions. Raises :class:`~verne_post.errors.InputError` naming the file and line.
+    conventions; ``feed`` (mm/min, whatever the file's units) is the feed of the feed moves
+    before the first FEDRAT, for CAM output that gives none (recorded in ``notes``). Raises
+    :class:`~verne_post.errors.InputError` naming the file and line.
     """
     src = os.fspath(path)
     override = _check_units_arg(units)
@@ -369,38 +435,96 @@ def read_cl(
         raise InputError(f"arc direction must be 'cw' or 'ccw', got {arc_direction!r}")
     if frame not in (None, "local", "world", "apply"):
         raise InputError(f"frame must be 'local', 'world' or 'apply', got {frame!r}")
+    if feed is not None and not (isinstance(feed, (int, float)) and MIN_FEED <= feed <= MAX_FEED):
+        raise InputError(f"--feed must be from {MIN_FEED:g} to {MAX_FEED:g} mm/min, got {feed!r}")
     if not (isinstance(chordal_tolerance, (int, float)) and 1e-6 <= chordal_tolerance <= 10.0):
         raise InputError(f"chordal tolerance must be from 1e-6 to 10 mm, got {chordal_tolerance!r}")
     text = _read_text(path, src)
-    dialect = detect_dialect(text).with_overrides(arc_direction, frame)
+    found = detect_dialect(text)
 
-    def attempt(text: str, direction: ArcDirection) -> ReaderState:
-        warnings = Warnings(src)
-        file_units = _decide_units(text, override, src, warnings)
-        st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings)
-        st.arc_direction = direction
-        _parse(iter_lines(text), st)
+    def reading(frames: FrameMode | None) -> ReaderState:
+        dialect = found.with_overrides(arc_direction, frames)
+
+        def attempt(direction: ArcDirection) -> ReaderState:
+            warnings = Warnings(src)
+            file_units = _decide_units(text, override, src, warnings)
+            st = ReaderState(src, file_units, override is not None, float(chordal_tolerance), dialect, warnings,
+                             None if feed is None else float(feed))
+            st.arc_direction = direction
+            _parse(iter_lines(text), st)
+            return st
+
+        st = attempt(dialect.arc_direction or "ccw")
+        ccw, cw, first_ccw, first_cw = _arc_evidence(st)
+        if dialect.arc_direction is not None:
+            against, first = (cw, first_cw) if dialect.arc_direction == "ccw" else (ccw, first_ccw)
+            agree = ccw + cw - against
+            if against > agree:
+                given = "as given by --arc-direction" if arc_direction else f"as {dialect.name} documents"
+                raise InputError(
+                    f"arcs run {'counter-clockwise' if dialect.arc_direction == 'ccw' else 'clockwise'} about the "
+                    f"CIRCLE axis {given}, but {against} of {ccw + cw} tangent moves into and out of the file's "
+                    f"arcs say the other way (this arc among them): check the CAM system, or give --arc-direction",
+                    source=src, line=first)
+        elif cw > ccw:
+            st = attempt("cw")
+        elif ccw == cw and st.arcs:
+            st.warn(st.arcs[0].line, "no tangent move tells the arc direction: counter-clockwise about the CIRCLE "
+                    "axis assumed (give --arc-direction to choose)")
         return st
 
-    st = attempt(text, dialect.arc_direction or "ccw")
-    ccw, cw, first_ccw, first_cw = _arc_evidence(st)
-    if dialect.arc_direction is not None:
-        against, first = (cw, first_cw) if dialect.arc_direction == "ccw" else (ccw, first_ccw)
-        agree = ccw + cw - against
-        if against > agree:
-            given = "as given by --arc-direction" if arc_direction else f"as {dialect.name} documents"
-            raise InputError(
-                f"arcs run {'counter-clockwise' if dialect.arc_direction == 'ccw' else 'clockwise'} about the "
-                f"CIRCLE axis {given}, but {against} of {ccw + cw} tangent moves into and out of the file's "
-                f"arcs say the other way (this arc among them): check the CAM system, or give --arc-direction",
-                source=src, line=first)
-    elif cw > ccw:
-        st = attempt(text, "cw")
-    elif ccw == cw and st.arcs:
-        st.warn(st.arcs[0].line, "no tangent move tells the arc direction: counter-clockwise about the CIRCLE "
-                "axis assumed (give --arc-direction to choose)")
-    del text  # the toolpath's arrays need the room
-    return st.result()
+    st = reading(frame)
+    if not (_FRAME_RE.search(text) and (frame or found.frames) in ("local", "apply")):
+        text = ""  # the toolpath's arrays need the room
+        return st.result()
+    return _frame_by_tool_direction(st.result(), frame, found.frames, lambda other: reading(other).result())
+
+
+# Frame records whose reading (the data in the frame, or mapped by it) can turn the tool over.
+_FRAME_RE = re.compile(r"^[ \t]*(?:MSYS|CSYS|ORIGIN)[ \t]*/", re.IGNORECASE | re.MULTILINE)
+
+
+def _up_share(tp: Toolpath) -> float:
+    """The share of the poses whose tool axis points away from the table (k > 0 in the part frame,
+    whose Z is the table's: the work offset only translates)."""
+    return float(np.mean(tp.axis[:, 2] > 1e-9))
+
+
+def _frame_by_tool_direction(tp: Toolpath, given: FrameMode | None, default: FrameMode,
+                             reading: Callable[[FrameMode], Toolpath]) -> Toolpath:
+    """Of the two readings of a file's frame records, the one under which the tool points away
+    from the table for most poses.
+
+    NX's MSYS says where the MCS sits in NX's absolute frame, and its CLSF documentation puts the
+    GOTO data in the MCS (the ``local`` reading); yet real NX files exist both ways (CL-DIALECTS:
+    drilling files with MSYS Z down and tool axes +Z in the MCS, a variable-contour file with MSYS
+    Z down and every axis down in the MCS). A tool pointing into the table is never the meaning:
+    of the readings ``local`` and ``apply``, the one with the tool above the part for most poses
+    is taken, with a warning and a note for the program header. ``--frame`` (``given``) is obeyed;
+    when it turns the tool down and the other reading would not, a warning says so.
+    """
+    share = _up_share(tp)
+    if share > 0.5:
+        return tp
+    other: FrameMode = "apply" if (given or default) == "local" else "local"
+    try:
+        alternative = reading(other)
+    except InputError:
+        return tp  # the other reading is not even readable: the first one's outcome stands
+    other_share = _up_share(alternative)
+    if other_share <= 0.5:
+        return tp
+    first = int(tp.line[0])
+    if given is not None:
+        hint = (f"--frame {given}: the tool axis points into the table at {1 - share:.0%} of the poses; with "
+                f"--frame {other} it points away from it at {other_share:.0%}")
+        return replace(tp, warnings=(*tp.warnings, f"{tp.source}:{first}: {hint}"), frame_hint=f"--frame {other}")
+    how = {"apply": "mapped by the frame records into the part frame", "local": "in the frame the records describe"}
+    text = (f"frames read as {other} (the data {how[other]}), not {given or default}: so the tool axis points away "
+            f"from the table at {other_share:.0%} of the poses, against {share:.0%}; --frame {default} overrides")
+    return replace(alternative, warnings=(*alternative.warnings, f"{tp.source}:{first}: {text}"),
+                   notes=(*alternative.notes, f"FRAMES READ AS {other.upper()}: THE TOOL AXES POINT AWAY FROM THE "
+                                              f"TABLE (--frame {default} OVERRIDES)"))
 
 
 _CSV_COLUMNS = ("x", "y", "z", "i", "j", "k")
@@ -445,10 +569,11 @@ def read_toolpath(path: str | os.PathLike[str], **kw: Any) -> Toolpath:
     """Read ``path`` as CSV poses if its suffix is ``.csv`` (any case), else as a CL file.
 
     Keyword arguments go to :func:`read_pose_csv` or :func:`read_cl`; ``chordal_tolerance``,
-    ``arc_direction`` and ``frame`` are dropped for CSV files (they have no arcs or frames).
+    ``arc_direction``, ``frame`` and ``feed`` are dropped for CSV files (they have no arcs or
+    frames, and their feed column is per row).
     """
     if Path(path).suffix.lower() == ".csv":
-        for key in ("chordal_tolerance", "arc_direction", "frame"):
+        for key in ("chordal_tolerance", "arc_direction", "frame", "feed"):
             kw.pop(key, None)
         return read_pose_csv(path, **kw)
     return read_cl(path, **kw)

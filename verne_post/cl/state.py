@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from verne_post.errors import InputError
+from verne_post.errors import CheckError, InputError
 from verne_post.toolpath import MOTION_KINDS, Event, Toolpath
 
 from .dialects import Dialect
@@ -127,7 +127,7 @@ class ReaderState:
     """Poses, modal state and shared helpers; record handlers (the family modules) act on it."""
 
     def __init__(self, src: str, units: Units, units_given: bool, tol_mm: float, dialect: Dialect,
-                 warnings: Warnings) -> None:
+                 warnings: Warnings, default_feed: float | None = None) -> None:
         self.src = src
         self.units: Units = units
         self.units_given = units_given
@@ -142,17 +142,23 @@ class ReaderState:
         self.motion: dict[int, int] = {}  # pose index -> MOTION code where not a plain feed move
         self.feed_override: dict[int, float] = {}
         # modal runs: (first pose index, feed mm/min or 1/min, inverse time, tool, frame id)
-        self.runs: list[tuple[int, float, bool, int, int]] = [(0, math.nan, False, 0, 0)]
+        # --feed (mm/min): the feed of the feed moves before the first FEDRAT (CAM output such as
+        # NCL's APT source may have no FEDRAT at all)
+        self.default_feed = default_feed
+        self.first_fedrat: int | None = None  # pose count at the first FEDRAT with a feed
+        start_feed = math.nan if default_feed is None else default_feed
+        self.runs: list[tuple[int, float, bool, int, int]] = [(0, start_feed, False, 0, 0)]
         self.events: list[Event | None] = []
         self.frames: list[tuple[np.ndarray, np.ndarray]] = [(np.eye(3), np.zeros(3))]
         self.frame_id = 0
         self.frame_declared = False  # a frame record has been read
+        self.index: tuple[int, int, float] | None = None  # ROTATE: (axis 0-2, the frame indexed, angle deg)
         self.arcs: list[Arc] = []
         self.axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
         self.rapid_next = False
-        self.feed_val = math.nan
+        self.feed_val = start_feed
         self.inverse = False
-        self.feed_problem = "feed move before any FEDRAT"
+        self.feed_problem = "feed move before any FEDRAT: the file gives no feed here; give one with --feed MM/MIN"
         self.fpr: float | None = None  # feed per revolution, mm/rev
         self.rpm: float | None = None
         self.spindle_dir: Literal["CW", "CCW"] = "CW"
@@ -176,11 +182,20 @@ class ReaderState:
         self.cutcom_warned = False
         self.done = False
         self.tools: Any = None  # tools.ToolHeader: tool loads and data of the current operation header
+        # A malformed machine-function record (CATIA's user-typed SPINDL/900CCLW) waiting for a valid
+        # one of its word to replace it before any motion: word -> (its line, its text, the error)
+        self.malformed: dict[str, tuple[int, str, InputError]] = {}
+        self.pp_words: dict[str, int] = {}  # CATIA PP words typed by the user (not CL records): text -> first line
 
     # ------------------------------------------------------------------ messages
 
     def fail(self, reason: str, line: int | None) -> InputError:
         return InputError(reason, source=self.src, line=line)
+
+    def other_machine(self, reason: str, line: int | None) -> CheckError:
+        """A well-formed program for another kind of machine (a lathe, several heads): exit code 3,
+        as for any program this machine cannot run."""
+        return CheckError(reason, source=self.src, line=line)
 
     def warn(self, line: int | None, text: str, kind: str | None = None) -> None:
         self.warnings.add(line, text, kind)
@@ -236,6 +251,7 @@ class ReaderState:
             and (self.tools is None or not self.tools.open)
             and self.multax is not False
             and self.homeless is None
+            and not self.malformed
         )
 
     def push_state(self) -> None:
@@ -263,6 +279,8 @@ class ReaderState:
         if self.homeless is not None:
             raise self.fail("GOHOME without a FROM position (the machine's home is not known here), and motion "
                             "after it", self.homeless)
+        if self.malformed:
+            self.motion_after_malformed()
         if self.tools is not None and self.tools.open:
             self.tools.close(self)
         if not rapid and feed is None and self.feed_val != self.feed_val:
@@ -290,6 +308,11 @@ class ReaderState:
         code = MOTION["rapid"] if rapid else MOTION[motion]
         if code:
             self.motion.update(dict.fromkeys(range(start, len(self.lines)), code))
+
+    def motion_after_malformed(self) -> None:
+        """Motion while a malformed machine-function record is in force: its error, as for any record."""
+        _line, _text, error = min(self.malformed.values(), key=lambda m: m[0])
+        raise error
 
     def take_rapid(self) -> bool:
         r = self.rapid_next
@@ -355,11 +378,25 @@ class ReaderState:
             inverse[idx] = False
         feed[rapid] = np.nan
         inverse[rapid] = False
+        notes: tuple[str, ...] = ()
+        if self.default_feed is not None:
+            before = np.arange(n) < (n if self.first_fedrat is None else self.first_fedrat)
+            given = before & ~rapid
+            if self.feed_override:
+                given[np.fromiter(self.feed_override.keys(), dtype=np.int64)] = False
+            used = int(given.sum())
+            if used:
+                first = int(line[np.argmax(given)])
+                notes = (f"FEED {self.default_feed:g} MM/MIN FROM --feed FOR THE {used} FEED MOVES BEFORE THE FIRST "
+                         f"FEDRAT (FROM CL LINE {first})",)
+            else:
+                self.warn(None, f"--feed {self.default_feed:g} not used: a FEDRAT comes before every feed move")
         return Toolpath(
             source=self.src, tip=np.ascontiguousarray(tip), axis=np.ascontiguousarray(axis), line=line,
             rapid=rapid, feed=feed, tool=tool, inverse_time=inverse,
             events=tuple(e for e in self.events if e is not None), part_name=self.part_name, units=self.units,
             warnings=self.warnings.lines(), dialect=self.dialect.describe(self.arc_direction), motion=motion,
+            notes=notes,
         )  # fmt: skip
 
     def _to_common_frame(self, tip: np.ndarray, axis: np.ndarray, frame: np.ndarray, line: np.ndarray

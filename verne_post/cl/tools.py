@@ -144,6 +144,10 @@ def _load_with(st: ReaderState, tool: float, kw: dict[str, float], what: str, li
     length = _length(st, kw["LENGTH"], what, line) if "LENGTH" in kw else None
     _header(st).new_load(st, _tool_number(st, tool, line), adjust, length, line)
     st.cycle = None
+    bad = st.malformed.pop("SPINDL", None)
+    if bad is not None:  # the tool change stops the spindle (M6) before any motion: the record ran for no cut
+        st.warn(bad[0], f"{bad[1]} is malformed ({bad[2].reason}); the tool change at line {line} stops the spindle "
+                "before any motion: ignored")
 
 
 def load(st: ReaderState, rec: Record) -> None:

@@ -8,20 +8,23 @@ alpha of the platform (rad) and the tool-axis angles (phi1, phi2) (rad) come alo
 Every axis has two angle pairs, (phi1, phi2) and (-phi1, phi2 + pi) (``pair`` = +1 / -1);
 theta2 = -phi2 (eq. 26), alpha = theta1 + phi1 (eq. 30). At phi1 = 0 (axis along the table
 normal) phi2 and so theta2 are free: the caller's ``theta2`` value is used there.
+
+Joints in and out are the controller's readings: the true joint is the reading plus the
+geometry's ``rho_offset`` / ``theta_offset`` (zero by default).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..machine import Geometry
 from .module import (
+    _module_fk_all,
+    _module_fk_working,
     closure_ok,
     is_working_mode,
-    module_fk_all,
-    module_fk_working,
     solutions_for_alpha,
     working_sliders,
 )
@@ -63,6 +66,12 @@ def axis_from_angles(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     """Unit tool axis (N, 3), table frame, from (phi1, phi2) in rad."""
     s1 = np.sin(phi1)
     return np.stack([s1 * np.sin(phi2), -s1 * np.cos(phi2), np.cos(phi1) + 0.0 * phi2], axis=-1)
+
+
+def _true_theta2(geom: Geometry, theta2: np.ndarray | float) -> np.ndarray:
+    """True rotary angle (rad) of a theta2 reading (untouched without offsets: bit-identical)."""
+    theta2 = np.asarray(theta2, dtype=float)
+    return theta2 + geom.theta_offset[1] if geom.has_offsets else theta2
 
 
 def _tilted_platform(geom: Geometry, tip: np.ndarray, axis: np.ndarray, phi2: np.ndarray
@@ -127,7 +136,8 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     axis = np.atleast_2d(np.asarray(axis, dtype=float))
     n = tip.shape[0]
     pair = np.broadcast_to(np.asarray(pair), (n,))
-    theta2_at_pole = np.broadcast_to(np.asarray(theta2_at_pole, dtype=float), (n,))
+    # The caller's theta2 at the pole is a reading, like every joint out of here.
+    theta2_at_pole = np.broadcast_to(_true_theta2(geom, theta2_at_pole), (n,))
     phi1, phi2 = axis_angles(axis, pair, theta2_at_pole)
     xp, a, b = _platform_coefficients(geom, tip, axis, phi1, phi2)
     g = geom
@@ -154,7 +164,7 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     leg_one_reaches = x1sq <= k + two_rr
     retry = np.flatnonzero(~good & leg_one_reaches & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
     if retry.size and exact_fallback:
-        exact = machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
+        exact = _machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
         wm = exact.working_mode
         order = np.lexsort((np.abs(exact.alpha[wm]), exact.pose_index[wm]))
         found, first = np.unique(exact.pose_index[wm][order], return_index=True)
@@ -165,7 +175,7 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     joints[~good] = np.nan
     alpha = np.where(good, alpha, np.nan)
     platform = _platform_pose(geom, xp, a, b, alpha)
-    return MachineIK(joints, alpha, np.column_stack([phi1, phi2]), platform, good)
+    return MachineIK(geom.readings(joints), alpha, np.column_stack([phi1, phi2]), platform, good)
 
 
 @dataclass(frozen=True)
@@ -188,6 +198,13 @@ def machine_ik_all(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.n
     in alpha = theta1 + phi1 as a sextic in tan(alpha/2); each real root gives the platform
     pose and, through eq. 10-13, up to 4 slider sets (more on the special cases of Table II).
     """
+    found = _machine_ik_all(geom, tip, axis, pair, _true_theta2(geom, theta2_at_pole))
+    return found if not geom.has_offsets else replace(found, joints=geom.readings(found.joints))
+
+
+def _machine_ik_all(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray | int | None,
+                    theta2_at_pole: np.ndarray | float) -> MachineIKSolutions:
+    """:func:`machine_ik_all` in true joint positions (theta2 at the pole a true value too)."""
     tip = np.atleast_2d(np.asarray(tip, dtype=float))
     axis = np.atleast_2d(np.asarray(axis, dtype=float))
     n = tip.shape[0]
@@ -226,22 +243,24 @@ def _polish(geom: Geometry, x1: np.ndarray, a: np.ndarray, b: np.ndarray, alpha:
     return alpha
 
 
-def tool_pose(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
+def tool_pose(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, theta1: np.ndarray, theta2: np.ndarray,
+              delta: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 32-33: tool tip (N, 3) mm and unit axis (N, 3) in the table frame.
 
-    ``platform`` (N, 3) mm base frame, alpha/theta1/theta2 rad.
+    ``platform`` (N, 3) mm base frame, alpha rad, theta1/theta2 the *true* table angles in rad
+    (not readings). ``delta`` (mm, one or per pose): P to tool tip, default the geometry's.
     """
     g = geom
+    delta = g.delta if delta is None else delta
     xp, yp, zp = platform[:, 0], platform[:, 1], platform[:, 2]
     c1, s1 = np.cos(theta1), np.sin(theta1)
     c2, s2 = np.cos(theta2), np.sin(theta2)
     phi1 = alpha - theta1
-    lateral = g.delta * np.sin(phi1) - c1 * yp - s1 * (zp - g.da)
+    lateral = delta * np.sin(phi1) - c1 * yp - s1 * (zp - g.da)
     tip = np.stack([
         c2 * xp + s2 * lateral,
         -s2 * xp + c2 * lateral,
-        s1 * yp - c1 * zp + g.da * c1 - g.delta * np.cos(phi1) + g.dt,
+        s1 * yp - c1 * zp + g.da * c1 - delta * np.cos(phi1) + g.dt,
     ], axis=-1)
     return tip, axis_from_angles(phi1, -theta2)
 
@@ -262,8 +281,8 @@ def machine_fk_working(geom: Geometry, joints: np.ndarray, alpha_guess: np.ndarr
 
     ``alpha_guess`` (rad): optional start for the platform tilt (see module_fk_working).
     """
-    joints = np.atleast_2d(np.asarray(joints, dtype=float))
-    module = module_fk_working(geom, joints[:, :3], alpha_guess)
+    joints = geom.true_joints(np.atleast_2d(np.asarray(joints, dtype=float)))
+    module = _module_fk_working(geom, joints[:, :3], alpha_guess)
     tip, axis = tool_pose(geom, module.platform, module.alpha, joints[:, 3], joints[:, 4])
     return MachineFK(tip, axis, module.platform, module.alpha, module.reachable)
 
@@ -283,8 +302,8 @@ class MachineFKSolutions:
 
 def machine_fk_all(geom: Geometry, joints: np.ndarray) -> MachineFKSolutions:
     """All assembly modes (eq. 32-33 over the module's FK solutions) for joints (N, 5)."""
-    joints = np.atleast_2d(np.asarray(joints, dtype=float))
-    module = module_fk_all(geom, joints[:, :3])
+    joints = geom.true_joints(np.atleast_2d(np.asarray(joints, dtype=float)))
+    module = _module_fk_all(geom, joints[:, :3])
     j = joints[module.pose_index]
     tip, axis = tool_pose(geom, module.platform, module.alpha, j[:, 3], j[:, 4])
     phi = np.column_stack([wrap_angle(module.alpha - j[:, 3]), wrap_angle(-j[:, 4])])

@@ -36,7 +36,9 @@ def module_jacobian(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho
     """d(xP, yP, zP, alpha)/d(rho1, rho2, rho3), (N, 4, 3), from the closure equations.
 
     Differentiating eq. 3a, 3b, 4, 5: A d(pose) + B d(rho) = 0, so d(pose) = -A^-1 B d(rho).
+    ``rho`` (N, 3) mm are slider readings (the geometry's offsets are added).
     """
+    rho = geom.true_joints(rho)
     rods, d_alpha, _ = _rod_vectors(geom, platform, alpha, rho)
     a = np.concatenate([rods, np.sum(rods * d_alpha, axis=-1, keepdims=True)], axis=-1)
     b = np.zeros((*rods.shape[:2], 3))
@@ -51,8 +53,9 @@ def singularity_measures(geom: Geometry, platform: np.ndarray, alpha: np.ndarray
     serial: min over the four rod equations of |cos| of the angle between the rod and its
     vertical guideway (a rod perpendicular to its guideway: the slider no longer moves the
     platform along the rod). parallel: inverse condition number of the direct-kinematics
-    matrix A with rows normalised by rod length and the alpha column by R1.
+    matrix A with rows normalised by rod length and the alpha column by R1. ``rho`` are readings.
     """
+    rho = geom.true_joints(rho)
     rods, d_alpha, lengths = _rod_vectors(geom, platform, alpha, rho)
     units = rods / lengths[:, None]
     serial = np.min(np.abs(units[..., 2]), axis=-1)
@@ -66,11 +69,12 @@ def machine_jacobian(geom: Geometry, joints: np.ndarray, platform: np.ndarray, a
     """(N, 6, 5): rows d(tip)/dq (mm per mm or per rad) and d(axis)/dq, table frame.
 
     q = (rho1, rho2, rho3, theta1, theta2); platform (N, 3) mm and alpha rad of the
-    assembly mode (from the FK).
+    assembly mode (from the FK). ``joints`` are readings (mm, rad).
     """
     g = geom
     xp, yp, zp = platform[:, 0], platform[:, 1], platform[:, 2]
-    t1, t2 = joints[:, 3], joints[:, 4]
+    true = g.true_joints(joints)
+    t1, t2 = true[:, 3], true[:, 4]
     c1, s1, c2, s2 = np.cos(t1), np.sin(t1), np.cos(t2), np.sin(t2)
     phi1, phi2 = alpha - t1, -t2
     cp, sp = np.cos(phi1), np.sin(phi1)
@@ -174,8 +178,10 @@ def margins(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.
     theta2 is left out on purpose: the rotary table's pole (axis along the table normal) is a
     singularity of its own, handled by the postprocessor's pole logic. Rotating the tip rows
     by theta2 changes no condition number, so (xP, lateral, z) rows stand for the tip.
+    ``joints`` are readings (the geometry's offsets are added).
     """
     g = geom
+    joints = g.true_joints(joints)
     c, s = np.cos(alpha), np.sin(alpha)
     x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
     rho = joints[:, :3]

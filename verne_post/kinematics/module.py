@@ -4,13 +4,18 @@ Frames and units: base frame R_b of the paper, z pointing DOWN, lengths in mm. T
 pose is ``Trans(xP, yP, zP) Rot(x, alpha)``: ``platform`` arrays are (N, 3) = (xP, yP, zP) in
 mm, ``alpha`` in radians, slider positions ``rho`` (N, 3) = (rho1, rho2, rho3) in mm.
 
+Slider positions in and out of the public IK/FK functions are the controller's *readings*;
+the true position is the reading plus the geometry's ``rho_offset`` (zero by default). The
+closure and mode helpers (``closure_residuals``, ``closure_ok``, ``is_working_mode``,
+``configuration_signs``) and the private functions work on true positions.
+
 The machine's *working mode* (paper, Fig. 5 (m)): every slider point above its platform
 points (s_i = -1, z down) and no rod crossing in leg I (R1 cos(alpha) > r1).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -174,7 +179,8 @@ def module_ik_working(geom: Geometry, platform: np.ndarray) -> ModuleIK:
     rho = working_sliders(geom, platform, alpha)
     reachable = (w >= 0) & (geom.R1 * np.cos(alpha) > geom.r1) & np.all(np.isfinite(rho), axis=-1) & np.isfinite(w)
     reachable &= closure_ok(geom, platform, alpha, np.where(reachable[:, None], rho, 0.0))
-    return ModuleIK(np.where(reachable[:, None], rho, np.nan), np.where(reachable, alpha, np.nan), reachable)
+    rho = geom.readings(np.where(reachable[:, None], rho, np.nan))
+    return ModuleIK(rho, np.where(reachable, alpha, np.nan), reachable)
 
 
 @dataclass(frozen=True)
@@ -254,7 +260,8 @@ def module_ik_all(geom: Geometry, platform: np.ndarray) -> ModuleIKSolutions:
     solutions = solutions_for_alpha(geom, platform[index], alpha, index)
     order = np.lexsort((solutions.rho[:, 2], solutions.rho[:, 1], solutions.rho[:, 0], solutions.alpha,
                         solutions.pose_index))
-    return ModuleIKSolutions(*(getattr(solutions, f)[order] for f in ModuleIKSolutions.__dataclass_fields__))
+    found = ModuleIKSolutions(*(getattr(solutions, f)[order] for f in ModuleIKSolutions.__dataclass_fields__))
+    return found if not geom.has_offsets else replace(found, rho=geom.readings(found.rho))
 
 
 # --------------------------------------------------------------------------- forward kinematics
@@ -376,12 +383,16 @@ def _degenerate_solutions(geom: Geometry, rho: np.ndarray) -> tuple[np.ndarray, 
 
 
 def module_fk_all(geom: Geometry, rho: np.ndarray) -> ModuleFKSolutions:
-    """All assembly modes (platform (K, 3) mm, alpha rad) for slider positions rho (N, 3) mm.
+    """All assembly modes (platform (K, 3) mm, alpha rad) for slider readings rho (N, 3) mm.
 
     Roots of the degree-12 eliminant in tan(alpha/2), polished and verified on the closure
     equations (eq. 2); consistent degenerate cases of eq. 23 are solved separately.
     """
-    rho = np.atleast_2d(np.asarray(rho, dtype=float))
+    return _module_fk_all(geom, geom.true_joints(np.atleast_2d(np.asarray(rho, dtype=float))))
+
+
+def _module_fk_all(geom: Geometry, rho: np.ndarray) -> ModuleFKSolutions:
+    """:func:`module_fk_all` of true slider positions (N, 3) mm."""
     c, s = TrigPoly.cos_sin(rho.shape[0])
     eliminant = _fk_elimination(geom, rho, c, s)[4]
     index, alpha = real_half_angle_roots(eliminant.num)
@@ -445,7 +456,7 @@ def _working_branch(geom: Geometry, rho: np.ndarray, alpha: np.ndarray) -> tuple
 
 
 def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None = None) -> ModuleFK:
-    """Platform position (N, 3) mm and alpha (rad) of the machine's assembly mode for rho (N, 3) mm.
+    """Platform position (N, 3) mm and alpha (rad) of the machine's assembly mode for slider readings rho (N, 3) mm.
 
     Fast path: secant iterations on eq. 13 along the working branch of the three-sphere
     intersection (:func:`_working_branch`), from alpha = 0 (the working alpha is small and the
@@ -453,7 +464,11 @@ def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray |
     alpha along a path: then 2-3 steps suffice). Poses where that does not land on a verified
     working-mode solution are solved by the exact all-modes route (:func:`module_fk_all`).
     """
-    rho = np.atleast_2d(np.asarray(rho, dtype=float))
+    return _module_fk_working(geom, geom.true_joints(np.atleast_2d(np.asarray(rho, dtype=float))), alpha_guess)
+
+
+def _module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None = None) -> ModuleFK:
+    """:func:`module_fk_working` of true slider positions (N, 3) mm."""
     warm = alpha_guess is not None
     a0 = np.nan_to_num(np.asarray(alpha_guess, dtype=float)) if warm else np.zeros(rho.shape[0])
     a1 = a0 + (1e-4 if warm else 0.02)
@@ -478,7 +493,7 @@ def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray |
     platform[~good], alpha[~good] = np.nan, np.nan
     retry = np.flatnonzero(~good)
     if retry.size:
-        exact = module_fk_all(geom, rho[retry])
+        exact = _module_fk_all(geom, rho[retry])
         found = exact.pose_index[exact.working_mode]
         # Several working assemblies cannot occur in the reachable workspace; if they do,
         # take the one with the smallest |alpha| (closest to the machine's home posture).
