@@ -113,8 +113,13 @@ def _post(tmp_path: Path, machine: vp.Machine, cl: Path, **options: object) -> t
     return text, np.array(offset)
 
 
-@pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md"),
-                                EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
+#: The CATIA sample's tool tilts 140 degrees, beyond what the VERNE reaches: refused (exit 3) by
+#: placement, as tests/test_cl_dialects.py asserts; every other real sample runs.
+TOO_TILTED = {"catia_v5_isoparametric_5axis_mm.aptsource"}
+
+
+@pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md" and p.name not in
+                                        TOO_TILTED), EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
 def test_every_move_between_cuts_of_the_real_samples_stays_on_the_cam_path_or_above_it(tmp_path, machine, cl):
     text, offset = _post(tmp_path, machine, cl, work_offset="auto", tool_length=100.0)
     path = read_toolpath(cl)

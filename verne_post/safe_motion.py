@@ -430,13 +430,11 @@ _LEG_FIELDS = ("start", "end", "tip0", "tip1", "axis0", "axis1", "up", "lift", "
 
 @dataclass(frozen=True)
 class Between:
-    """What :func:`between_cuts` made of a part: its blocks with the moves between cuts, the
-    problems found (CL pose index, reason), and how many moves ran on their line or detoured."""
+    """What :func:`between_cuts` made of a part: its blocks with the moves between cuts, and the
+    problems found (CL pose index, reason)."""
 
     blocks: Blocks
     problems: tuple[tuple[int, str], ...]
-    lines: int
-    detours: int
 
 
 def _state(blocks: Blocks, index: np.ndarray) -> State:
@@ -515,7 +513,7 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
         moves.append(Moves(start, end, lengths[pose], pose, np.zeros(count), np.ones(count), np.zeros(count, bool),
                            line))
     if not moves:
-        return Between(blocks, (), 0, 0)
+        return Between(blocks, ())
     every = Moves.join(moves)
     problems: list[tuple[int, str]] = []
     known_ends = (np.all(np.isfinite(every.start.joints), axis=1) & np.all(np.isfinite(every.end.joints), axis=1)
@@ -551,10 +549,10 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
                             np.zeros(0, int), np.ones(len(leg), bool)))
     # the block that ends a move into a CL pose is the last of that move (after a tool change, or
     # at the program's start, a feed pose's own block is the approach's last)
-    into = np.zeros(len(blocks.pose), bool)
-    into[np.searchsorted(blocks.pose, every.pose[every.f1 == 1.0])] = True
-    merged = replace(blocks, between=blocks.between | (into & (blocks.fraction == 1)))
+    ends_a_move = np.zeros(len(blocks.pose), bool)
+    ends_a_move[np.searchsorted(blocks.pose, every.pose[every.f1 == 1.0])] = True
+    merged = replace(blocks, between=blocks.between | (ends_a_move & (blocks.fraction == 1)))
     for more in extra:
         merged = merged.then(more)
     order = np.lexsort((merged.fraction, merged.pose))
-    return Between(merged.rows(order), tuple(problems), int(len(straight) - failed.sum()), int(detour.size))
+    return Between(merged.rows(order), tuple(problems))
