@@ -7,6 +7,7 @@ User-facing units are mm and degrees (YAML); :class:`Geometry` is what the kinem
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -339,14 +340,61 @@ class Machine(BaseModel):
 DEFAULT_MACHINE = "verne.yaml"
 
 
-def _format_validation_error(error: ValidationError) -> str:
-    first = error.errors()[0]
-    path = ".".join(str(p) for p in first["loc"]) or "(top level)"
-    message = first["msg"]
-    if first["type"] == "extra_forbidden":
-        message = "unknown key"
-    more = f" (and {error.error_count() - 1} more)" if error.error_count() > 1 else ""
-    return f"{path}: {message}{more}"
+@dataclass(frozen=True)
+class MachineProblem:
+    """One thing wrong in a machine file: the YAML line of the key or value at fault (None where
+    none is known), the key path (``joints.rho1.max``) and the reason."""
+
+    line: int | None
+    path: str
+    reason: str
+
+    def error(self, source: str) -> InputError:
+        return InputError(f"{self.path}: {self.reason}", source, self.line)
+
+
+#: A machine-wide check names the key at fault at the start of its message (``positions.home.rho1 = ...``).
+_PATH_IN_MESSAGE = re.compile(r"^([A-Za-z_][\w]*(?:\.[\w]+)+)\b")
+
+
+def _problems(error: ValidationError, lines: dict[tuple[str, ...], int]) -> list[MachineProblem]:
+    """Every error of a validation, each at the line of the deepest key of its path in the file."""
+    problems = []
+    for item in error.errors():
+        loc = tuple(str(p) for p in item["loc"])
+        reason = item["msg"].removeprefix("Value error, ")
+        if item["type"] == "extra_forbidden":
+            reason = "unknown key"
+        elif item["type"] == "missing":
+            reason = "missing (required)"
+        named = _PATH_IN_MESSAGE.match(reason)
+        if not loc and named:
+            loc = tuple(named.group(1).split("."))
+        line = next((lines[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in lines), None)
+        if item["type"] == "missing" and len(loc) > 1:  # a missing key: the line of the mapping that lacks it
+            line = next((lines[loc[:k]] for k in range(len(loc) - 1, 0, -1) if loc[:k] in lines), None)
+        problems.append(MachineProblem(line, ".".join(loc) or "(top level)", reason))
+    return problems
+
+
+def _key_lines(root: yaml.Node) -> dict[tuple[str, ...], int]:
+    """The 1-based line of every key (and sequence item) of a YAML document, by its key path."""
+    lines: dict[tuple[str, ...], int] = {}
+    stack: list[tuple[tuple[str, ...], yaml.Node]] = [((), root)]
+    while stack:
+        path, node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode):
+                    child = (*path, str(key.value))
+                    lines.setdefault(child, key.start_mark.line + 1)
+                    stack.append((child, value))
+        elif isinstance(node, yaml.SequenceNode):
+            for k, value in enumerate(node.value):
+                child = (*path, str(k))
+                lines.setdefault(child, value.start_mark.line + 1)
+                stack.append((child, value))
+    return lines
 
 
 #: Bounds on a machine file: bytes, nesting depth, and values (aliases expanded).
@@ -378,8 +426,9 @@ class _MachineLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
-def _parse_yaml(text: str, source: str) -> object:
-    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`."""
+def _parse_yaml(text: str, source: str) -> tuple[object, dict[tuple[str, ...], int]]:
+    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`, and the line of
+    each of its keys (:func:`_key_lines`)."""
     try:
         depth = 0
         for event in yaml.parse(text, Loader=_MachineLoader):  # the event stream: no recursion yet
@@ -393,9 +442,9 @@ def _parse_yaml(text: str, source: str) -> object:
         try:
             node = loader.get_single_node()
             if node is None:
-                return None
+                return None, {}
             _count_values(node, source)
-            return loader.construct_document(node)
+            return loader.construct_document(node), _key_lines(node)
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
@@ -455,13 +504,26 @@ def machine_text(path: str | Path | None = None) -> str:
 
 
 def machine_from_text(text: str, source: str) -> Machine:
-    """Parse and validate the text of a machine file (``source`` names it in messages)."""
-    data = _parse_yaml(text, source)
+    """Parse and validate the text of a machine file (``source`` names it in messages); the first
+    problem is an :class:`InputError` at its line (:func:`machine_problems` gives them all)."""
+    machine, problems = machine_problems(text, source)
+    if problems:
+        raise problems[0].error(source)
+    assert machine is not None
+    return machine
+
+
+def machine_problems(text: str, source: str) -> tuple[Machine | None, list[MachineProblem]]:
+    """The machine of a machine file's text and, if it has any, every problem in it in the order
+    of the file (then None): YAML errors end the reading at the first; the model's checks are
+    all reported, each at the line of its key. ``source`` names the file."""
+    data, lines = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)
     try:
         machine = Machine.model_validate(data)
     except ValidationError as exc:
-        raise InputError(f"invalid machine: {_format_validation_error(exc)}", source) from None
+        problems = _problems(exc, lines)
+        return None, sorted(problems, key=lambda p: (p.line is None, p.line or 0))
     machine._source = Path(source).name
-    return machine
+    return machine, []
