@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 from .errors import InputError
 
 # Every number finite (YAML's .inf and .nan are refused), unknown keys refused.
-_STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+_STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, use_attribute_docstrings=True)
 
 #: Largest magnitude of a length or position in a machine file (mm; 100 m), and of a joint
 #: position (mm or degrees): beyond any machine tool, and far from float overflow in the kinematics.
@@ -107,17 +107,29 @@ class Geometry:
 class GeometryConfig(BaseModel):
     model_config = _STRICT
     D1_minus_d1: Finite
+    """mm: leg I, platform joint x minus slider joint x (paper D1 - d1)."""
     D2_minus_d2: Finite
+    """mm: legs II and III, platform joint x minus slider joint x (paper D2 - d2)."""
     R1: Length
+    """mm: half the spacing of leg I's rods on the platform."""
     r1: Length
+    """mm: half the spacing of leg I's rods on the slider (smaller than R1: a trapezium)."""
     L1: Length
+    """mm: length of leg I's rods."""
     R2: Length
+    """mm: platform joints of legs II and III from the platform's centre line."""
     r4: Length
+    """mm: slider joints of legs II and III from the base's centre line."""
     L2: Length
+    """mm: length of leg II's rods."""
     L3: Length
+    """mm: length of leg III's rods."""
     spindle_nose: Length
+    """mm: platform centre P to the spindle nose; Delta = spindle_nose + tool length."""
     da: Finite
+    """mm: base origin to the tilt axis of the table (paper Table IV)."""
     dt: Finite
+    """mm: tilt axis to the rotary table's face (paper Table IV)."""
 
     @model_validator(mode="after")
     def _leg_one_is_a_trapezium(self) -> GeometryConfig:
@@ -160,12 +172,19 @@ class JointLimits(BaseModel):
 
     model_config = _STRICT
     min: Finite | None = None
+    """Lowest reading: mm for a slider, degrees for a rotary (absent for a continuous rotary)."""
     max: Finite | None = None
+    """Highest reading: mm for a slider, degrees for a rotary."""
     continuous: bool = False
+    """A rotary without end stops (theta2 only)."""
     offset: Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)] = 0.0
+    """mm or degrees: the true position is the reading plus this (verne-post calibrate)."""
     velocity: Velocity
+    """mm/s or deg/s."""
     acceleration: Acceleration
+    """mm/s^2 or deg/s^2."""
     jerk: Jerk
+    """mm/s^3 or deg/s^3."""
 
     @model_validator(mode="after")
     def _range(self) -> JointLimits:
@@ -201,15 +220,21 @@ class Singularity(BaseModel):
 
     model_config = _STRICT
     serial_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest |cos| of a rod's angle to its guideway (0: the rod perpendicular to it)."""
     parallel_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest inverse condition number of the parallel module's direct kinematics (0: singular)."""
     machine_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest inverse condition number of the tool Jacobian (0: two working solutions merge)."""
     rod_clearance_min: Annotated[float, Field(ge=0, le=MAX_MM)]
+    """mm: smallest R1 cos(alpha) - r1 (leg I's rods cross at 0)."""
 
 
 class Pole(BaseModel):
     model_config = _STRICT
     cone: Annotated[float, Field(gt=0, lt=90)]
+    """deg: within this cone about the table normal theta2 is interpolated, not computed."""
     max_theta2_rate: Annotated[float, Field(gt=0, le=1e6)]
+    """deg of theta2 per mm of tip travel near the pole above which a feed move is reported."""
 
 
 class TimingConfig(BaseModel):
@@ -218,21 +243,29 @@ class TimingConfig(BaseModel):
     model_config = _STRICT
     # deg/min: rotary speed of blocks where the tip stands still
     rotary_feed: Annotated[float, Field(ge=1e-3, le=1e8)] = 3600.0
+    """deg/min: rotary speed of feed blocks where the tip stands still."""
     corner_angle: Annotated[float, Field(gt=0, le=180)] = 30.0  # deg: sharper corners stop the motion
+    """deg: a sharper corner (joint space, weighted by the velocity limits) stops the motion."""
 
 
 class Tool(BaseModel):
     model_config = _STRICT
     length: Annotated[float, Field(ge=0, le=MAX_TOOL_LENGTH)]
+    """mm: spindle nose to tool tip (gauge length)."""
 
 
 class GcodeConfig(BaseModel):
     model_config = _STRICT
     linear_decimals: Annotated[int, Field(ge=0, le=8)] = 4
+    """Decimals of X Y Z (sliders, mm)."""
     angular_decimals: Annotated[int, Field(ge=0, le=8)] = 4
+    """Decimals of A C (degrees)."""
     feed_decimals: Annotated[int, Field(ge=0, le=8)] = 5
+    """Decimals of F (inverse time, 1/min)."""
     block_numbers: bool = False
+    """Write N block numbers."""
     block_number_step: Annotated[int, Field(ge=1, le=10**6)] = 10
+    """Increment of the block numbers."""
 
 
 class JointPosition(BaseModel):
@@ -240,10 +273,15 @@ class JointPosition(BaseModel):
 
     model_config = _STRICT
     rho1: Finite
+    """mm: slider 1."""
     rho2: Finite
+    """mm: slider 2."""
     rho3: Finite
+    """mm: slider 3."""
     theta1: Finite
+    """deg: table tilt."""
     theta2: Finite
+    """deg: rotary table."""
 
     def joints(self) -> np.ndarray:
         """(5,) rho1..3 mm, theta1 and theta2 rad."""
@@ -255,19 +293,21 @@ class Positions(BaseModel):
 
     model_config = _STRICT
     home: JointPosition | None = None
+    """Where every program starts and ends (joint space)."""
     tool_change: JointPosition | None = None
+    """Where every tool change happens (joint space)."""
 
 
 class SafeConfig(BaseModel):
     """How the machine moves between cuts (rapids, retracts, tool changes)."""
 
     model_config = _STRICT
-    # deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches
     max_turn_in_rapid: Annotated[float, Field(ge=0, le=180)] = 30.0
-    # mm: the safe level is this far above the program's highest feed point (table-frame z)
+    """deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches."""
     clearance: Annotated[float, Field(ge=0, le=MAX_MM)] = 10.0
-    # mm/min: a cap on the tool-tip speed relative to the part in rapids (None: the joint limits only)
+    """mm: the safe level is this far above the program's highest feed point (table-frame z)."""
     rapid_feed: Annotated[float, Field(ge=1.0, le=1e8)] | None = None
+    """mm/min: a cap on the tool-tip speed relative to the part in rapids (absent: the joint limits only)."""
 
 
 class CalibrationRecord(BaseModel):
@@ -292,17 +332,29 @@ class Machine(BaseModel):
 
     model_config = _STRICT
     name: Annotated[str, Field(min_length=1, max_length=200)]
+    """The machine's name, written in the program header."""
     geometry: GeometryConfig
+    """The kinematic dimensions (mm), identified or calibrated."""
     joints: Joints
+    """Travel, zero offsets and velocity, acceleration and jerk limits per joint."""
     singularity: Singularity
+    """Margins below which a pose is too close to a singularity."""
     pole: Pole
+    """The rotary table's pole (tool axis along the table normal)."""
     tools: dict[Annotated[int, Field(ge=0, le=10**9)], Tool] = Field(default_factory=dict)
+    """Tool table: tool number to gauge length (mm), used where the CL file gives none."""
     work_offset: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    """mm: part zero in the table frame (x, y, z), unless --work-offset gives one."""
     gcode: GcodeConfig = GcodeConfig()
+    """Number formats of the program."""
     timing: TimingConfig = TimingConfig()
+    """Time-parametrisation settings."""
     safe: SafeConfig = SafeConfig()
+    """Moves between cuts: rapids, retracts, tool changes."""
     positions: Positions = Positions()
+    """Joint-space positions of the start, end and tool changes."""
     calibration: CalibrationRecord | None = None
+    """Provenance of a calibrated file (written by verne-post calibrate)."""
     _source: str = PrivateAttr(default="verne.yaml")
 
     @model_validator(mode="after")
