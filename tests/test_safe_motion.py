@@ -118,6 +118,19 @@ def _post(tmp_path: Path, machine: vp.Machine, cl: Path, **options: object) -> t
 TOO_TILTED = {"catia_v5_isoparametric_5axis_mm.aptsource"}
 
 
+#: mm: where the hand-made parts sit on the table
+OFFSET = np.array([0.0, 0.0, 250.0])
+
+
+def _post_cl(tmp_path: Path, machine: vp.Machine, name: str, text: str) -> tuple[str, object, np.ndarray]:
+    """Post a hand-made CL file at :data:`OFFSET`: the program, the CL path and its tips in the table frame."""
+    cl = tmp_path / f"{name}.cls"
+    cl.write_text(text)
+    program, _ = _post(tmp_path, machine, cl, work_offset=tuple(OFFSET))
+    path = read_toolpath(cl)
+    return program, path, path.tip + OFFSET
+
+
 @pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md" and p.name not in
                                         TOO_TILTED), EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
 def test_every_move_between_cuts_of_the_real_samples_stays_on_the_cam_path_or_above_it(tmp_path, machine, cl):
@@ -147,12 +160,7 @@ GOTO/100.0,60.0,0.0,0.0,0.0,1.0
 
 
 def test_a_rapid_between_two_clearance_points_at_one_height_dips_by_nothing(tmp_path, machine):
-    cl = tmp_path / "clearance.cls"
-    cl.write_text(CLEARANCE_CL)
-    offset = np.array([0.0, 0.0, 250.0])
-    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
-    path = read_toolpath(cl)
-    tip = path.tip + offset
+    text, path, tip = _post_cl(tmp_path, machine, "clearance", CLEARANCE_CL)
     # the case is a real one: the joint-space line between the two clearance points sags below them
     ends = vp.inverse_kinematics(machine, tip[1:3], path.axis[1:3], tool_length=80.0).joints
     f = np.linspace(0.0, 1.0, 101)
@@ -160,7 +168,7 @@ def test_a_rapid_between_two_clearance_points_at_one_height_dips_by_nothing(tmp_
     assert tip[1, 2] - sag[:, 2].min() > 1.0
     judged = judge_moves_between_cuts(machine, text, tip, path.axis, path.rapid)
     assert judged["dip"] < 0.5e-3  # 0 um when rounded to um
-    verification = verify_program(text, machine, against=path, work_offset=tuple(offset))
+    verification = verify_program(text, machine, against=path, work_offset=tuple(OFFSET))
     assert verification.ok and verification.rapid_dip is not None and verification.rapid_dip < 0.5e-3
 
 
@@ -178,12 +186,8 @@ GOTO/30.0,0.0,0.0,0.7071067811865476,0.0,0.7071067811865476
 
 
 def test_a_rapid_that_turns_the_axis_by_90_degrees_retracts_reorients_above_and_approaches(tmp_path, machine):
-    cl = tmp_path / "turn.cls"
-    cl.write_text(TURN_CL)
-    offset = np.array([0.0, 0.0, 250.0])
-    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
-    path = read_toolpath(cl)
-    tip, axis = path.tip + offset, path.axis
+    text, path, tip = _post_cl(tmp_path, machine, "turn", TURN_CL)
+    axis = path.axis
     program = read_gcode(text)
     fk = vp.forward_kinematics(machine, program.joints, tool_length=program.tool_length)
     top = tip[~path.rapid, 2].max()
