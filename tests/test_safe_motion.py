@@ -337,3 +337,22 @@ def test_positions_outside_the_joints_travel_are_refused(tmp_path, machine):
     (tmp_path / "m.yaml").write_text(bad)
     with pytest.raises(InputError, match=r"positions.tool_change.rho1 = 1400 is outside the travel of rho1"):
         vp.load_machine(tmp_path / "m.yaml")
+
+
+def test_without_positions_the_tool_is_changed_high_enough_for_the_longer_tool(tmp_path, machine):
+    bare = vp.Machine.model_validate({**machine.model_dump(), "positions": {}})
+    cl = tmp_path / "tools.cls"
+    cl.write_text(TOOLS_CL)  # tool 1: 60 mm, tool 2: 100 mm
+    text, _ = _post(tmp_path, bare, cl, work_offset=tuple(OFFSET))
+    path = read_toolpath(cl)
+    level = (path.tip + OFFSET)[~path.rapid, 2].max() + bare.safe.clearance
+    lines = text.splitlines()
+    m6 = next(k for k, line in enumerate(lines) if line.startswith("T2 M6"))
+    last = [line for k, line in _blocks(text) if k < m6][-1]
+    joints = _joints_of(last)
+    joints[3:] = np.radians(joints[3:])
+    for length in (60.0, 100.0):  # both tools' tips at the safe level or above where the tool changes
+        assert vp.forward_kinematics(bare, joints[None], tool_length=length).tip[0, 2] >= level - 1e-3
+    assert _blocks(text)[0][1].startswith("G0")  # positioned over the first point, not at a home
+    judged = judge_moves_between_cuts(bare, text, path.tip + OFFSET, path.axis, path.rapid)
+    assert judged["judged"] > 0
