@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -9,6 +10,9 @@ import yaml
 
 import verne_post as vp
 from verne_post.errors import InputError
+from verne_post.machine import machine_problems
+
+ROOT = Path(__file__).resolve().parent.parent
 
 SHIPPED = Path(vp.__file__).parent / "machines" / "verne.yaml"
 
@@ -45,9 +49,9 @@ def test_tool_length_changes_delta() -> None:
     ("mutate", "message"),
     [
         (lambda d: d.update(colour="red"), "colour: unknown key"),
-        (lambda d: d["geometry"].pop("L1"), "geometry.L1: Field required"),
+        (lambda d: d["geometry"].pop("L1"), "geometry.L1: missing (required)"),
         (lambda d: d["geometry"].update(L2=-5), "geometry.L2: Input should be greater than 0"),
-        (lambda d: d["joints"]["rho1"].update(min=1400), "joints.rho1: Value error, min (1400.0) must be smaller"),
+        (lambda d: d["joints"]["rho1"].update(min=1400), "joints.rho1: min (1400.0) must be smaller"),
         (lambda d: d["joints"]["theta1"].update(velocity="fast"), "joints.theta1.velocity: Input should be a valid"),
         (lambda d: d["geometry"].update(dt=float("nan")), "geometry.dt: Input should be a finite number"),
         (lambda d: d["joints"]["rho2"].update(continuous=True), "joints.rho2"),
@@ -72,9 +76,29 @@ def test_bad_machine_files(tmp_path: Path, mutate, message: str) -> None:
     with pytest.raises(InputError) as error:
         vp.load_machine(path)
     text = str(error.value)
-    assert text.startswith(f"{path}: invalid machine: ")
+    line = re.match(rf"{re.escape(str(path))}:(\d+): ", text)
+    assert line is not None, text
+    # the line holds the key at fault (or, for a missing key, the mapping that lacks it)
+    key = message.split(":")[0].split(".")
+    written = path.read_text().splitlines()[int(line.group(1)) - 1]
+    assert any(part in written for part in key if not part.isdigit()) or key[-1].isdigit()
     assert message in text
     assert "\n" not in text
+
+
+def test_machine_problems_are_all_listed_each_at_its_line(tmp_path: Path) -> None:
+    text = (ROOT / "machines" / "verne.yaml").read_text()
+    lines = text.splitlines()
+    broken = (text.replace("  R1: 129.71", "  R1: 12x9.71")
+              .replace("rho2:   {min: 0.0, max: 1300.0", "rho2:   {min: 1400.0, max: 1300.0")
+              .replace("  corner_angle: 30.0", "  corner_angle: 30.0\n  bogus: 1"))
+    expected = [next(k for k, line in enumerate(lines) if line.startswith(prefix)) + 1
+                for prefix in ("  R1:", "  rho2:", "  corner_angle:")]
+    expected[2] += 1  # the unknown key, on the line after corner_angle
+    _, problems = machine_problems(broken, "m.yaml")
+    assert [(p.line, p.path) for p in problems] == list(zip(expected, ["geometry.R1", "joints.rho2", "timing.bogus"],
+                                                            strict=True))
+    assert [p.reason for p in problems][2] == "unknown key"
 
 
 def test_not_yaml(tmp_path: Path) -> None:
@@ -89,10 +113,15 @@ def _shipped_text() -> str:
     return SHIPPED.read_text()
 
 
+def _line_of(prefix: str) -> int:
+    """The 1-based line of the shipped file that starts with ``prefix``."""
+    return next(k for k, line in enumerate(_shipped_text().splitlines()) if line.startswith(prefix)) + 1
+
+
 @pytest.mark.parametrize(("text", "line", "message"), [
-    (_shipped_text().replace("  R1: 129.71\n", "  R1: 129.71\n  R1: 130.0\n"), 11,
-     "duplicate key 'R1' (first at line 10)"),
-    (_shipped_text() + "name: OTHER\n", None, "duplicate key 'name' (first at line 4)"),
+    (_shipped_text().replace("  R1: 129.71\n", "  R1: 129.71\n  R1: 130.0\n"), _line_of("  R1:") + 1,
+     f"duplicate key 'R1' (first at line {_line_of('  R1:')})"),
+    (_shipped_text() + "name: OTHER\n", None, f"duplicate key 'name' (first at line {_line_of('name:')})"),
     (_shipped_text().replace("L1: 849.97", "L1: .inf"), None, "geometry.L1: Input should be a finite number"),
     (_shipped_text().replace("da: 2007.81", "da: .nan"), None, "geometry.da: Input should be a finite number"),
     (_shipped_text().replace("L2: 950.37", "L2: 1.0e+400"), None, "geometry.L2: Input should be a finite number"),
@@ -104,10 +133,12 @@ def _shipped_text() -> str:
     ("&a [*a]\n", 1, "more than 100000 values"),
     (_shipped_text() + "#" * (1 << 20), None, "machine file larger than 1048576 bytes"),
     # an integer beyond Python's 4,300-digit conversion limit, and a float as long
-    (_shipped_text().replace("L1: 849.97", "L1: " + "9" * 5000), 12, "a number of 5000 characters (at most 100)"),
-    (_shipped_text().replace("L1: 849.97", "L1: 0." + "9" * 5000), 12, "a number of 5002 characters"),
+    (_shipped_text().replace("L1: 849.97", "L1: " + "9" * 5000), _line_of("  L1:"),
+     "a number of 5000 characters (at most 100)"),
+    (_shipped_text().replace("L1: 849.97", "L1: 0." + "9" * 5000), _line_of("  L1:"), "a number of 5002 characters"),
     ("a: [1, 2, -" + "1" * 101 + "]\n", 1, "a number of 102 characters"),
-    (_shipped_text().replace("L1: 849.97", f"L1: {10**400}"), 12, "a number of 401 characters"),  # beyond any float
+    (_shipped_text().replace("L1: 849.97", f"L1: {10**400}"), _line_of("  L1:"),
+     "a number of 401 characters"),  # beyond any float
 ])
 def test_malformed_machine_yaml(tmp_path: Path, text: str, line: int | None, message: str) -> None:
     path = _write(tmp_path, text)
@@ -136,5 +167,5 @@ def test_unreachable_reference_pose_is_rejected_with_the_reason(tmp_path: Path) 
     assert np.all(horizontal > g.L1)
     with pytest.raises(InputError) as error:
         vp.load_machine(_write(tmp_path, data))
-    assert "geometry: Value error, the reference pose" in str(error.value)
+    assert "geometry: the reference pose" in str(error.value)
     assert "not reachable in the working mode: no assembly of the legs reaches it" in str(error.value)

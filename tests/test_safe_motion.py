@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 
 import verne_post as vp
 from verne_post.cl import read_toolpath
+from verne_post.errors import InputError
 from verne_post.motion.safe_motion import dip_below, upward_normal
 from verne_post.options import PostOptions
 from verne_post.pipeline import post
@@ -113,8 +114,26 @@ def _post(tmp_path: Path, machine: vp.Machine, cl: Path, **options: object) -> t
     return text, np.array(offset)
 
 
-@pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md"),
-                                EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
+#: The CATIA sample's tool tilts 140 degrees, beyond what the VERNE reaches: refused (exit 3) by
+#: placement, as tests/test_cl_dialects.py asserts; every other real sample runs.
+TOO_TILTED = {"catia_v5_isoparametric_5axis_mm.aptsource"}
+
+
+#: mm: where the hand-made parts sit on the table
+OFFSET = np.array([0.0, 0.0, 250.0])
+
+
+def _post_cl(tmp_path: Path, machine: vp.Machine, name: str, text: str) -> tuple[str, object, np.ndarray]:
+    """Post a hand-made CL file at :data:`OFFSET`: the program, the CL path and its tips in the table frame."""
+    cl = tmp_path / f"{name}.cls"
+    cl.write_text(text)
+    program, _ = _post(tmp_path, machine, cl, work_offset=tuple(OFFSET))
+    path = read_toolpath(cl)
+    return program, path, path.tip + OFFSET
+
+
+@pytest.mark.parametrize("cl", [*sorted(p for p in SAMPLES.iterdir() if p.suffix != ".md" and p.name not in
+                                        TOO_TILTED), EXAMPLES / "nx_swarf_inch_crlf.cls"], ids=lambda p: p.name)
 def test_every_move_between_cuts_of_the_real_samples_stays_on_the_cam_path_or_above_it(tmp_path, machine, cl):
     text, offset = _post(tmp_path, machine, cl, work_offset="auto", tool_length=100.0)
     path = read_toolpath(cl)
@@ -142,12 +161,7 @@ GOTO/100.0,60.0,0.0,0.0,0.0,1.0
 
 
 def test_a_rapid_between_two_clearance_points_at_one_height_dips_by_nothing(tmp_path, machine):
-    cl = tmp_path / "clearance.cls"
-    cl.write_text(CLEARANCE_CL)
-    offset = np.array([0.0, 0.0, 250.0])
-    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
-    path = read_toolpath(cl)
-    tip = path.tip + offset
+    text, path, tip = _post_cl(tmp_path, machine, "clearance", CLEARANCE_CL)
     # the case is a real one: the joint-space line between the two clearance points sags below them
     ends = vp.inverse_kinematics(machine, tip[1:3], path.axis[1:3], tool_length=80.0).joints
     f = np.linspace(0.0, 1.0, 101)
@@ -155,7 +169,7 @@ def test_a_rapid_between_two_clearance_points_at_one_height_dips_by_nothing(tmp_
     assert tip[1, 2] - sag[:, 2].min() > 1.0
     judged = judge_moves_between_cuts(machine, text, tip, path.axis, path.rapid)
     assert judged["dip"] < 0.5e-3  # 0 um when rounded to um
-    verification = verify_program(text, machine, against=path, work_offset=tuple(offset))
+    verification = verify_program(text, machine, against=path, work_offset=tuple(OFFSET))
     assert verification.ok and verification.rapid_dip is not None and verification.rapid_dip < 0.5e-3
 
 
@@ -173,12 +187,8 @@ GOTO/30.0,0.0,0.0,0.7071067811865476,0.0,0.7071067811865476
 
 
 def test_a_rapid_that_turns_the_axis_by_90_degrees_retracts_reorients_above_and_approaches(tmp_path, machine):
-    cl = tmp_path / "turn.cls"
-    cl.write_text(TURN_CL)
-    offset = np.array([0.0, 0.0, 250.0])
-    text, _ = _post(tmp_path, machine, cl, work_offset=tuple(offset))
-    path = read_toolpath(cl)
-    tip, axis = path.tip + offset, path.axis
+    text, path, tip = _post_cl(tmp_path, machine, "turn", TURN_CL)
+    axis = path.axis
     program = read_gcode(text)
     fk = vp.forward_kinematics(machine, program.joints, tool_length=program.tool_length)
     top = tip[~path.rapid, 2].max()
@@ -300,3 +310,50 @@ def test_dip_below_a_segment_agrees_with_a_brute_force_scan():
         heights = [(p[k] - a[k]) @ (np.cos(t) * n + np.sin(t) * np.cross(d[k], n)) for t in (0.0,)]
         expected[k] = max(-heights[0], under_end, 0.0)
     assert np.allclose(found, expected, atol=1e-9)
+
+
+def test_the_rapid_feed_of_the_machine_file_caps_the_tip_speed_of_every_move_between_cuts(tmp_path, machine):
+    capped = vp.Machine.model_validate({**machine.model_dump(), "safe": {**machine.safe.model_dump(),
+                                                                         "rapid_feed": 3000.0}})
+    cl = tmp_path / "clearance.cls"
+    cl.write_text(CLEARANCE_CL)
+    text, _ = _post(tmp_path, capped, cl, work_offset=(0.0, 0.0, 250.0))
+    program = read_gcode(text)
+    between = np.flatnonzero(program.rapid & np.isfinite(program.duration))
+    assert between.size > 10
+    f = np.linspace(0.0, 1.0, 33)
+    speeds = []
+    for m in between:
+        q = program.joints[m - 1] + f[:, None] * (program.joints[m] - program.joints[m - 1])
+        tip = vp.forward_kinematics(capped, q, tool_length=program.tool_length[m]).tip
+        speeds.append(np.sum(np.linalg.norm(np.diff(tip, axis=0), axis=1)) / program.duration[m] * 60.0)
+    assert max(speeds) <= 3000.0 * 1.01  # the written F words' rounding
+    assert max(speeds) > 2000.0  # the cap is what limits them
+
+
+def test_positions_outside_the_joints_travel_are_refused(tmp_path, machine):
+    text = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
+    bad = text.replace("tool_change: {rho1: 100.0", "tool_change: {rho1: 1400.0")
+    assert bad != text
+    (tmp_path / "m.yaml").write_text(bad)
+    with pytest.raises(InputError, match=r"positions.tool_change.rho1 = 1400 is outside the travel of rho1"):
+        vp.load_machine(tmp_path / "m.yaml")
+
+
+def test_without_positions_the_tool_is_changed_high_enough_for_the_longer_tool(tmp_path, machine):
+    bare = vp.Machine.model_validate({**machine.model_dump(), "positions": {}})
+    cl = tmp_path / "tools.cls"
+    cl.write_text(TOOLS_CL)  # tool 1: 60 mm, tool 2: 100 mm
+    text, _ = _post(tmp_path, bare, cl, work_offset=tuple(OFFSET))
+    path = read_toolpath(cl)
+    level = (path.tip + OFFSET)[~path.rapid, 2].max() + bare.safe.clearance
+    lines = text.splitlines()
+    m6 = next(k for k, line in enumerate(lines) if line.startswith("T2 M6"))
+    last = [line for k, line in _blocks(text) if k < m6][-1]
+    joints = _joints_of(last)
+    joints[3:] = np.radians(joints[3:])
+    for length in (60.0, 100.0):  # both tools' tips at the safe level or above where the tool changes
+        assert vp.forward_kinematics(bare, joints[None], tool_length=length).tip[0, 2] >= level - 1e-3
+    assert _blocks(text)[0][1].startswith("G0")  # positioned over the first point, not at a home
+    judged = judge_moves_between_cuts(bare, text, path.tip + OFFSET, path.axis, path.rapid)
+    assert judged["judged"] > 0

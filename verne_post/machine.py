@@ -7,6 +7,8 @@ User-facing units are mm and degrees (YAML); :class:`Geometry` is what the kinem
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Annotated
@@ -20,7 +22,7 @@ from .kinematics import reference_pose_problem
 from .kinematics.geometry import Geometry
 
 # Every number finite (YAML's .inf and .nan are refused), unknown keys refused.
-_STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+_STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, use_attribute_docstrings=True)
 
 #: Largest magnitude of a length or position in a machine file (mm; 100 m), and of a joint
 #: position (mm or degrees): beyond any machine tool, and far from float overflow in the kinematics.
@@ -39,17 +41,29 @@ Jerk = Annotated[float, Field(ge=1e-3, le=1e10)]
 class GeometryConfig(BaseModel):
     model_config = _STRICT
     D1_minus_d1: Finite
+    """mm: leg I, platform joint x minus slider joint x (paper D1 - d1)."""
     D2_minus_d2: Finite
+    """mm: legs II and III, platform joint x minus slider joint x (paper D2 - d2)."""
     R1: Length
+    """mm: half the spacing of leg I's rods on the platform."""
     r1: Length
+    """mm: half the spacing of leg I's rods on the slider (smaller than R1: a trapezium)."""
     L1: Length
+    """mm: length of leg I's rods."""
     R2: Length
+    """mm: platform joints of legs II and III from the platform's centre line."""
     r4: Length
+    """mm: slider joints of legs II and III from the base's centre line."""
     L2: Length
+    """mm: length of leg II's rods."""
     L3: Length
+    """mm: length of leg III's rods."""
     spindle_nose: Length
+    """mm: platform centre P to the spindle nose; Delta = spindle_nose + tool length."""
     da: Finite
+    """mm: base origin to the tilt axis of the table (paper Table IV)."""
     dt: Finite
+    """mm: tilt axis to the rotary table's face (paper Table IV)."""
 
     @model_validator(mode="after")
     def _leg_one_is_a_trapezium(self) -> GeometryConfig:
@@ -83,12 +97,19 @@ class JointLimits(BaseModel):
 
     model_config = _STRICT
     min: Finite | None = None
+    """Lowest reading: mm for a slider, degrees for a rotary (absent for a continuous rotary)."""
     max: Finite | None = None
+    """Highest reading: mm for a slider, degrees for a rotary."""
     continuous: bool = False
+    """A rotary without end stops (theta2 only)."""
     offset: Annotated[float, Field(ge=-MAX_OFFSET, le=MAX_OFFSET)] = 0.0
+    """mm or degrees: the true position is the reading plus this (verne-post calibrate)."""
     velocity: Velocity
+    """mm/s or deg/s."""
     acceleration: Acceleration
+    """mm/s^2 or deg/s^2."""
     jerk: Jerk
+    """mm/s^3 or deg/s^3."""
 
     @model_validator(mode="after")
     def _range(self) -> JointLimits:
@@ -124,15 +145,21 @@ class Singularity(BaseModel):
 
     model_config = _STRICT
     serial_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest |cos| of a rod's angle to its guideway (0: the rod perpendicular to it)."""
     parallel_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest inverse condition number of the parallel module's direct kinematics (0: singular)."""
     machine_min: Annotated[float, Field(ge=0, lt=1)]
+    """Smallest inverse condition number of the tool Jacobian (0: two working solutions merge)."""
     rod_clearance_min: Annotated[float, Field(ge=0, le=MAX_MM)]
+    """mm: smallest R1 cos(alpha) - r1 (leg I's rods cross at 0)."""
 
 
 class Pole(BaseModel):
     model_config = _STRICT
     cone: Annotated[float, Field(gt=0, lt=90)]
+    """deg: within this cone about the table normal theta2 is interpolated, not computed."""
     max_theta2_rate: Annotated[float, Field(gt=0, le=1e6)]
+    """deg of theta2 per mm of tip travel near the pole above which a feed move is reported."""
 
 
 class TimingConfig(BaseModel):
@@ -141,21 +168,29 @@ class TimingConfig(BaseModel):
     model_config = _STRICT
     # deg/min: rotary speed of blocks where the tip stands still
     rotary_feed: Annotated[float, Field(ge=1e-3, le=1e8)] = 3600.0
+    """deg/min: rotary speed of feed blocks where the tip stands still."""
     corner_angle: Annotated[float, Field(gt=0, le=180)] = 30.0  # deg: sharper corners stop the motion
+    """deg: a sharper corner (joint space, weighted by the velocity limits) stops the motion."""
 
 
 class Tool(BaseModel):
     model_config = _STRICT
     length: Annotated[float, Field(ge=0, le=MAX_TOOL_LENGTH)]
+    """mm: spindle nose to tool tip (gauge length)."""
 
 
 class GcodeConfig(BaseModel):
     model_config = _STRICT
     linear_decimals: Annotated[int, Field(ge=0, le=8)] = 4
+    """Decimals of X Y Z (sliders, mm)."""
     angular_decimals: Annotated[int, Field(ge=0, le=8)] = 4
+    """Decimals of A C (degrees)."""
     feed_decimals: Annotated[int, Field(ge=0, le=8)] = 5
+    """Decimals of F (inverse time, 1/min)."""
     block_numbers: bool = False
+    """Write N block numbers."""
     block_number_step: Annotated[int, Field(ge=1, le=10**6)] = 10
+    """Increment of the block numbers."""
 
 
 class JointPosition(BaseModel):
@@ -163,10 +198,15 @@ class JointPosition(BaseModel):
 
     model_config = _STRICT
     rho1: Finite
+    """mm: slider 1."""
     rho2: Finite
+    """mm: slider 2."""
     rho3: Finite
+    """mm: slider 3."""
     theta1: Finite
+    """deg: table tilt."""
     theta2: Finite
+    """deg: rotary table."""
 
     def joints(self) -> np.ndarray:
         """(5,) rho1..3 mm, theta1 and theta2 rad."""
@@ -178,19 +218,21 @@ class Positions(BaseModel):
 
     model_config = _STRICT
     home: JointPosition | None = None
+    """Where every program starts and ends (joint space)."""
     tool_change: JointPosition | None = None
+    """Where every tool change happens (joint space)."""
 
 
 class SafeConfig(BaseModel):
     """How the machine moves between cuts (rapids, retracts, tool changes)."""
 
     model_config = _STRICT
-    # deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches
     max_turn_in_rapid: Annotated[float, Field(ge=0, le=180)] = 30.0
-    # mm: the safe level is this far above the program's highest feed point (table-frame z)
+    """deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches."""
     clearance: Annotated[float, Field(ge=0, le=MAX_MM)] = 10.0
-    # mm/min: a cap on the tool-tip speed relative to the part in rapids (None: the joint limits only)
+    """mm: the safe level is this far above the program's highest feed point (table-frame z)."""
     rapid_feed: Annotated[float, Field(ge=1.0, le=1e8)] | None = None
+    """mm/min: a cap on the tool-tip speed relative to the part in rapids (absent: the joint limits only)."""
 
 
 class CalibrationRecord(BaseModel):
@@ -215,17 +257,29 @@ class Machine(BaseModel):
 
     model_config = _STRICT
     name: Annotated[str, Field(min_length=1, max_length=200)]
+    """The machine's name, written in the program header."""
     geometry: GeometryConfig
+    """The kinematic dimensions (mm), identified or calibrated."""
     joints: Joints
+    """Travel, zero offsets and velocity, acceleration and jerk limits per joint."""
     singularity: Singularity
+    """Margins below which a pose is too close to a singularity."""
     pole: Pole
+    """The rotary table's pole (tool axis along the table normal)."""
     tools: dict[Annotated[int, Field(ge=0, le=10**9)], Tool] = Field(default_factory=dict)
+    """Tool table: tool number to gauge length (mm), used where the CL file gives none."""
     work_offset: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    """mm: part zero in the table frame (x, y, z), unless --work-offset gives one."""
     gcode: GcodeConfig = GcodeConfig()
+    """Number formats of the program."""
     timing: TimingConfig = TimingConfig()
+    """Time-parametrisation settings."""
     safe: SafeConfig = SafeConfig()
+    """Moves between cuts: rapids, retracts, tool changes."""
     positions: Positions = Positions()
+    """Joint-space positions of the start, end and tool changes."""
     calibration: CalibrationRecord | None = None
+    """Provenance of a calibrated file (written by verne-post calibrate)."""
     _source: str = PrivateAttr(default="verne.yaml")
 
     @model_validator(mode="after")
@@ -263,14 +317,61 @@ class Machine(BaseModel):
 DEFAULT_MACHINE = "verne.yaml"
 
 
-def _format_validation_error(error: ValidationError) -> str:
-    first = error.errors()[0]
-    path = ".".join(str(p) for p in first["loc"]) or "(top level)"
-    message = first["msg"]
-    if first["type"] == "extra_forbidden":
-        message = "unknown key"
-    more = f" (and {error.error_count() - 1} more)" if error.error_count() > 1 else ""
-    return f"{path}: {message}{more}"
+@dataclass(frozen=True)
+class MachineProblem:
+    """One thing wrong in a machine file: the YAML line of the key or value at fault (None where
+    none is known), the key path (``joints.rho1.max``) and the reason."""
+
+    line: int | None
+    path: str
+    reason: str
+
+    def error(self, source: str) -> InputError:
+        return InputError(f"{self.path}: {self.reason}", source, self.line)
+
+
+#: A machine-wide check names the key at fault at the start of its message (``positions.home.rho1 = ...``).
+_PATH_IN_MESSAGE = re.compile(r"^([A-Za-z_][\w]*(?:\.[\w]+)+)\b")
+
+
+def _problems(error: ValidationError, lines: dict[tuple[str, ...], int]) -> list[MachineProblem]:
+    """Every error of a validation, each at the line of the deepest key of its path in the file."""
+    problems = []
+    for item in error.errors():
+        loc = tuple(str(p) for p in item["loc"])
+        reason = item["msg"].removeprefix("Value error, ")
+        if item["type"] == "extra_forbidden":
+            reason = "unknown key"
+        elif item["type"] == "missing":
+            reason = "missing (required)"
+        named = _PATH_IN_MESSAGE.match(reason)
+        if not loc and named:
+            loc = tuple(named.group(1).split("."))
+        line = next((lines[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in lines), None)
+        if item["type"] == "missing" and len(loc) > 1:  # a missing key: the line of the mapping that lacks it
+            line = next((lines[loc[:k]] for k in range(len(loc) - 1, 0, -1) if loc[:k] in lines), None)
+        problems.append(MachineProblem(line, ".".join(loc) or "(top level)", reason))
+    return problems
+
+
+def _key_lines(root: yaml.Node) -> dict[tuple[str, ...], int]:
+    """The 1-based line of every key (and sequence item) of a YAML document, by its key path."""
+    lines: dict[tuple[str, ...], int] = {}
+    stack: list[tuple[tuple[str, ...], yaml.Node]] = [((), root)]
+    while stack:
+        path, node = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode):
+                    child = (*path, str(key.value))
+                    lines.setdefault(child, key.start_mark.line + 1)
+                    stack.append((child, value))
+        elif isinstance(node, yaml.SequenceNode):
+            for k, value in enumerate(node.value):
+                child = (*path, str(k))
+                lines.setdefault(child, value.start_mark.line + 1)
+                stack.append((child, value))
+    return lines
 
 
 #: Bounds on a machine file: bytes, nesting depth, and values (aliases expanded).
@@ -302,8 +403,9 @@ class _MachineLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
-def _parse_yaml(text: str, source: str) -> object:
-    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`."""
+def _parse_yaml(text: str, source: str) -> tuple[object, dict[tuple[str, ...], int]]:
+    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`, and the line of
+    each of its keys (:func:`_key_lines`)."""
     try:
         depth = 0
         for event in yaml.parse(text, Loader=_MachineLoader):  # the event stream: no recursion yet
@@ -317,9 +419,9 @@ def _parse_yaml(text: str, source: str) -> object:
         try:
             node = loader.get_single_node()
             if node is None:
-                return None
+                return None, {}
             _count_values(node, source)
-            return loader.construct_document(node)
+            return loader.construct_document(node), _key_lines(node)
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
@@ -379,13 +481,26 @@ def machine_text(path: str | Path | None = None) -> str:
 
 
 def machine_from_text(text: str, source: str) -> Machine:
-    """Parse and validate the text of a machine file (``source`` names it in messages)."""
-    data = _parse_yaml(text, source)
+    """Parse and validate the text of a machine file (``source`` names it in messages); the first
+    problem is an :class:`InputError` at its line (:func:`machine_problems` gives them all)."""
+    machine, problems = machine_problems(text, source)
+    if problems:
+        raise problems[0].error(source)
+    assert machine is not None
+    return machine
+
+
+def machine_problems(text: str, source: str) -> tuple[Machine | None, list[MachineProblem]]:
+    """The machine of a machine file's text and, if it has any, every problem in it in the order
+    of the file (then None): YAML errors end the reading at the first; the model's checks are
+    all reported, each at the line of its key. ``source`` names the file."""
+    data, lines = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)
     try:
         machine = Machine.model_validate(data)
     except ValidationError as exc:
-        raise InputError(f"invalid machine: {_format_validation_error(exc)}", source) from None
+        problems = _problems(exc, lines)
+        return None, sorted(problems, key=lambda p: (p.line is None, p.line or 0))
     machine._source = Path(source).name
-    return machine
+    return machine, []

@@ -430,13 +430,11 @@ _LEG_FIELDS = ("start", "end", "tip0", "tip1", "axis0", "axis1", "up", "lift", "
 
 @dataclass(frozen=True)
 class Between:
-    """What :func:`between_cuts` made of a part: its blocks with the moves between cuts, the
-    problems found (CL pose index, reason), and how many moves ran on their line or detoured."""
+    """What :func:`between_cuts` made of a part: its blocks with the moves between cuts, and the
+    problems found (CL pose index, reason)."""
 
     blocks: Blocks
     problems: tuple[tuple[int, str], ...]
-    lines: int
-    detours: int
 
 
 def _state(blocks: Blocks, index: np.ndarray) -> State:
@@ -499,24 +497,23 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
                 target = _above(machine, here, lengths[[pose]], settings, longer).joints[0]
         leave_to[pose + 1] = target
         moves.append(single(here, at_joints(machine, target[None], lengths[[pose]], cone), pose, 1.0, 2.0, True))
-    # into every rapid's pose, and into the first pose after a tool change
-    for k in own[np.maximum(own, 1) >= max(skip, 1)]:
-        pose = int(ext.pose[k])
-        if k == 0 or not (poses.rapid[pose] or changes[pose]) or not known[k] or not known[k - 1]:
-            continue
-        if changes[pose]:
-            joints = leave_to.get(pose, ext.joints[k - 1])
-            start = at_joints(machine, joints[None], lengths[[pose]], cone)
-        else:
-            start = _state(ext, np.array([k - 1]))
-        move = single(start, _state(ext, np.array([k])), pose, 0.0, 1.0, False)
-        if not changes[pose]:
-            turn = _angle(move.start.axis, move.end.axis)
-            move = Moves(move.start, move.end, move.length, move.pose, move.f0, move.f1, move.final,
-                         (turn <= settings.max_turn) & keeps_its_pair(move.start, move.end, cone))
-        moves.append(move)
+    # into every rapid's pose, and into the first pose after a tool change (from where it happened)
+    into = own[(own >= max(skip, 1))]
+    into = into[(poses.rapid[ext.pose[into]] | changes[ext.pose[into]]) & known[into] & known[into - 1]]
+    if into.size:
+        pose = ext.pose[into]
+        retooled = changes[pose]
+        start_joints = ext.joints[into - 1].copy()
+        for i in np.flatnonzero(retooled):  # the tool was changed where the move away from the cut ended
+            start_joints[i] = leave_to.get(int(pose[i]), start_joints[i])
+        start = at_joints(machine, start_joints, lengths[pose], cone).where(retooled, _state(ext, into - 1))
+        end = _state(ext, into)
+        line = ~retooled & (_angle(start.axis, end.axis) <= settings.max_turn) & keeps_its_pair(start, end, cone)
+        count = len(into)
+        moves.append(Moves(start, end, lengths[pose], pose, np.zeros(count), np.ones(count), np.zeros(count, bool),
+                           line))
     if not moves:
-        return Between(blocks, (), 0, 0)
+        return Between(blocks, ())
     every = Moves.join(moves)
     problems: list[tuple[int, str]] = []
     known_ends = (np.all(np.isfinite(every.start.joints), axis=1) & np.all(np.isfinite(every.end.joints), axis=1)
@@ -552,10 +549,10 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
                             np.zeros(0, int), np.ones(len(leg), bool)))
     # the block that ends a move into a CL pose is the last of that move (after a tool change, or
     # at the program's start, a feed pose's own block is the approach's last)
-    into = np.zeros(len(blocks.pose), bool)
-    into[np.searchsorted(blocks.pose, every.pose[every.f1 == 1.0])] = True
-    merged = replace(blocks, between=blocks.between | (into & (blocks.fraction == 1)))
+    ends_a_move = np.zeros(len(blocks.pose), bool)
+    ends_a_move[np.searchsorted(blocks.pose, every.pose[every.f1 == 1.0])] = True
+    merged = replace(blocks, between=blocks.between | (ends_a_move & (blocks.fraction == 1)))
     for more in extra:
         merged = merged.then(more)
     order = np.lexsort((merged.fraction, merged.pose))
-    return Between(merged.rows(order), tuple(problems), int(len(straight) - failed.sum()), int(detour.size))
+    return Between(merged.rows(order), tuple(problems))

@@ -2,9 +2,10 @@
 
 The controller drives the joints directly: ``X Y Z`` are the slider positions rho1, rho2, rho3
 (mm), ``A`` the table tilt theta1 and ``C`` the rotary table theta2 (degrees, written as they
-accumulate, never wrapped to 0..360); ``B`` is never written. Rapid blocks are ``G0``; feed blocks
-are ``G1`` in inverse-time mode (``G93``) with an ``F`` word on every block, ``F = 60 / duration``
-(1/min). Layout::
+accumulate, never wrapped to 0..360); ``B`` is never written. The program's first move, from
+wherever the machine stands, is ``G0``; every other block is ``G1`` in inverse-time mode
+(``G93``) with an ``F`` word on every block, ``F = 60 / duration`` (1/min), the blocks of moves
+between cuts (rapids, retracts, tool changes: verne_post.motion.safe_motion) marked ``(RAPID)``. Layout::
 
     %
     (PART name)
@@ -16,6 +17,8 @@ are ``G1`` in inverse-time mode (``G93``) with an ``F`` word on every block, ``F
     M8
     G0 X.. Y.. Z.. A.. C..
     G93
+    G1 X.. Y.. Z.. A.. C.. F.. (RAPID)
+    ...
     G1 X.. Y.. Z.. A.. C.. F..
     ...
     M5 M9

@@ -105,7 +105,29 @@ def _trajectory(machine: Machine, result: PostResult) -> dict[str, Any] | None:
         columns[f"a_{name}"] = qdd[:, j] * scale[j]
     columns["feed"] = feed
     columns["programmed"] = wanted
-    return _series(t, columns, result.poses.line[blocks.pose][block])
+    return {**_series(t, columns, result.poses.line[blocks.pose][block]), "between": _between(schedule)}
+
+
+_BETWEEN_NOTE = ("<p class=\"note\"><span style=\"background:#fde7c4\">&nbsp;Shaded&nbsp;</span>: the machine "
+                 "moves between cuts (rapids on the CAM's line, retracts, reorientations, approaches, tool changes "
+                 "and home), at the joint limits.</p>")
+
+#: Intervals of moves between cuts drawn at most (closer ones are merged).
+BETWEEN_INTERVALS = 2000
+
+
+def _between(schedule: Schedule) -> list[list[float]]:
+    """The time intervals (s) of the moves between cuts (rapids, retracts, reorientations, tool
+    changes), merged where they touch or lie closer than the drawing can show."""
+    spans = sorted((s.start, s.start + s.plan.total) for s in schedule.segments if s.rapid)
+    gap = schedule.total / BETWEEN_INTERVALS
+    merged: list[list[float]] = []
+    for start, end in spans:  # one per rapid sequence: far fewer than the blocks
+        if merged and start - merged[-1][1] <= gap:
+            merged[-1][1] = max(merged[-1][1], end)
+        else:
+            merged.append([start, end])
+    return [[round(a, 4), round(b, 4)] for a, b in merged]
 
 
 def _margins(machine: Machine, result: PostResult) -> dict[str, Any]:
@@ -258,8 +280,8 @@ def render(machine: Machine, options: PostOptions, result: PostResult) -> str:
         title=html.escape(Path(report["source"]).name), summary=summary, tools=tools,
         messages=f"<ul class=\"messages\">{listing}</ul>" if listing else "<p>None.</p>",
         excerpts=_cl_excerpts(result.poses.source, named), data=payload, script=_SCRIPT, style=_STYLE,
-        timing_note="" if data["trajectory"] else "<p class=\"note\">No time-parametrisation (--no-timing, or "
-                                                  "violations): joint traces, feeds and the time budget need it.</p>")
+        timing_note=_BETWEEN_NOTE if data["trajectory"] else "<p class=\"note\">No time-parametrisation "
+                    "(--no-timing, or violations): joint traces, feeds and the time budget need it.</p>")
     return page.encode("ascii", "xmlcharrefreplace").decode("ascii")
 
 
@@ -371,6 +393,10 @@ _SCRIPT = r"""
       ticks(yr[0], yr[1], 4).forEach(function (v) { g.beginPath(); g.moveTo(left, py(v)); g.lineTo(w - right, py(v));
         g.stroke(); g.fillText(fmt(v), 4, py(v) + 4); });
       ticks(xr[0], xr[1], 8).forEach(function (v) { g.fillText(fmt(v), px(v) - 8, h - 6); });
+      g.fillStyle = "#fde7c4";  // the moves between cuts, behind the traces
+      (d.between || []).forEach(function (b) { var a = px(Math.max(b[0], xr[0])), e = px(Math.min(b[1], xr[1]));
+        if (e > a - 1) g.fillRect(a, top, Math.max(e - a, 1), h - top - bottom); });
+      g.fillStyle = "#555";
       (spec.limits || []).forEach(function (l) { g.strokeStyle = "#b42318"; g.setLineDash([5, 4]); g.beginPath();
         g.moveTo(left, py(l.y)); g.lineTo(w - right, py(l.y)); g.stroke(); g.setLineDash([]);
         g.fillStyle = "#b42318"; g.fillText(l.label, w - right - g.measureText(l.label).width - 2, py(l.y) - 3); });
