@@ -44,9 +44,10 @@ from benchmarks.scurve import scurve_baseline_time  # noqa: E402
 from benchmarks.topp3 import topp3_reference  # noqa: E402
 from verne_post.motion.linearise import Blocks  # noqa: E402
 from verne_post.options import PostOptions  # noqa: E402
-from verne_post.pipeline import feed_speed, postprocess  # noqa: E402
+from verne_post.pipeline import postprocess  # noqa: E402
 from verne_post.planning.feed import grid  # noqa: E402
 from verne_post.planning.schedule import Schedule, Segment, plan_program  # noqa: E402
+from verne_post.planning.stage import feed_speed  # noqa: E402
 from verne_post.planning.timing import Limits, baseline_time, lower_bound_time  # noqa: E402
 
 

@@ -22,7 +22,7 @@ from verne_post.motion.linearise import angle_to_arc, distance_to_segment
 from verne_post.verify.rs274 import run_rs274
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
-# (file, work offset X Y Z mm): the README gives the same offsets.
+# (file, work offset X Y Z mm): docs/post.md gives the same offsets.
 CASES = [
     ("nx_variable_axis_inch.cls", (0.0, 0.0, 0.0)),
     ("nx_swarf_inch_crlf.cls", (0.0, 0.0, 0.0)),

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 from .planning.topp import Engine
+
+if TYPE_CHECKING:
+    from .machine import Machine
 
 
 @dataclass(frozen=True)
@@ -33,3 +36,10 @@ class PostOptions:
     planner: Engine = "copp"  # TOPP2 engine of the feed moves (planning.topp): copp-py, or toppra the reference
     optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.planning.third_order)
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
+
+
+def work_offset_in_force(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
+    """The work offset in force (mm): the option's, else the machine file's."""
+    offset = machine.work_offset if options.work_offset is None else options.work_offset
+    assert offset != "auto", "postprocess resolves the automatic work offset first"
+    return offset

@@ -34,7 +34,7 @@ from typing import IO, Any, Literal
 
 import numpy as np
 
-from .api import JOINT_NAMES, joint_bounds
+from .api import joint_bounds
 from .checks.limits import Violation, check_program, theta2_rate_warnings
 from .checks.stage import (
     Checked,
@@ -47,132 +47,32 @@ from .checks.stage import (
     solve_poses,
 )
 from .cl import read_toolpath
-from .cl.toolpath import Dwell, Event, ToolChange
+from .cl.toolpath import Event, ToolChange
 from .errors import OutputError
 from .machine import Machine
 from .motion.branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
 from .motion.linearise import Blocks
 from .motion.poses import MachinePoses, machine_poses
 from .motion.safe_motion import between_cuts
-from .options import PostOptions
+from .options import PostOptions, work_offset_in_force
 from .output.atomic import atomic_write
 from .output.gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
 from .placement.search import Placement, place
-from .planning.schedule import Schedule, SequenceError, feed_sequences, limit_ratios, plan_program, time_budget
+from .planning.schedule import Schedule, feed_sequences
+from .planning.stage import (
+    Planner,
+    Timing,
+    TimingTask,
+    block_durations,
+    feed_speed,
+    plan_timing,
+    rapid_speed_limit,
+)
 from .planning.timing import Limits
-from .planning.topp import Engine
 from .processes.helpers import Helper, VerifierProcess, available, outcome
+from .report.figures import Figures, report
 from .verify.verifier import Reference, Verification, Verifier, feed_top, verify_program
 from .version import __version__
-
-_MARGINS = ("serial", "parallel", "machine", "rod_clearance")
-
-
-@dataclass
-class Figures:
-    """The report's figures of a program's blocks, gathered a part at a time (:meth:`add`): mm,
-    rad inside, seconds. The timing figures only where every part was planned."""
-
-    blocks: int = 0
-    inserted: int = 0
-    in_pole_cone: int = 0
-    cone_deviation: float = 0.0  # rad: largest axis deviation in the pole cone
-    low: np.ndarray = field(default_factory=lambda: np.full(5, np.inf))  # joint ranges (finite blocks)
-    high: np.ndarray = field(default_factory=lambda: np.full(5, -np.inf))
-    margins: dict[str, float] = field(default_factory=lambda: dict.fromkeys(_MARGINS, np.inf))
-    feed_length: float = 0.0
-    rapid_length: float = 0.0
-    time: float = 0.0  # s: sum of the block durations
-    rapid_time: float = 0.0
-    time_per_tool: dict[int, float] = field(default_factory=dict)
-    planned: bool = True  # every part has a schedule
-    budget: dict[str, float] = field(default_factory=dict)
-    ratios: np.ndarray = field(default_factory=lambda: np.zeros((3, 5)))  # velocity, acceleration, jerk / limit
-
-    def add(self, poses: MachinePoses, path: PathIK, first: int, blocks: Blocks, rapid: np.ndarray, timed: Timing,
-            context: int = 0) -> None:
-        """Add the figures of a part: the path of poses ``first``... and its blocks, their timing
-        (with the planner's figures, if gathered); the first ``context`` blocks belong to the part
-        before (the motion from there counts)."""
-        own = slice(context, None)
-        joints = blocks.joints[own]
-        finite = joints[np.all(np.isfinite(joints), axis=1)]
-        if len(finite):
-            self.low, self.high = np.fmin(self.low, finite.min(axis=0)), np.fmax(self.high, finite.max(axis=0))
-        self.blocks += len(joints)
-        self.inserted += int(np.sum(blocks.fraction[own] != 1))
-        self.in_pole_cone += int(path.in_cone.sum())
-        axis = poses.axis[first:first + len(path.axis)]
-        self.cone_deviation = max(self.cone_deviation, float(np.max(
-            2 * np.arcsin(np.linalg.norm(path.axis - axis, axis=1) / 2), initial=0.0)))
-        for name in _MARGINS:
-            self.margins[name] = float(np.fmin(self.margins[name], np.nanmin(
-                getattr(blocks.result.margins, name)[own], initial=np.inf)))
-        step = np.linalg.norm(np.diff(blocks.tip, axis=0), axis=1)
-        self.feed_length += float(np.sum(step[~rapid[1:]]))
-        self.rapid_length += float(np.sum(step[rapid[1:]]))
-        own_duration, own_rapid = timed.duration[own], rapid[own]
-        self.time += float(np.sum(own_duration))
-        self.rapid_time += float(np.sum(own_duration[own_rapid]))
-        tools = poses.tool[blocks.pose[own]]
-        for tool in np.unique(tools):
-            self.time_per_tool[int(tool)] = self.time_per_tool.get(int(tool), 0.0) + float(
-                np.sum(own_duration[tools == tool]))
-        self.planned &= timed.planned
-        if timed.ratios is not None and timed.budget is not None:
-            self.ratios = np.maximum(self.ratios, timed.ratios)
-            for name, value in timed.budget.items():
-                self.budget[name] = self.budget.get(name, 0.0) + value
-
-
-def _finite(value: float) -> float | None:
-    return value if np.isfinite(value) else None
-
-
-def _report(machine: Machine, options: PostOptions, poses: MachinePoses, violations: list[Violation],
-            warnings: list[str], figures: Figures, placement: Placement | None, seconds: dict[str, float]
-            ) -> dict[str, Any]:
-    """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
-    scale = np.array([1.0, 1.0, 1.0, 180 / np.pi, 180 / np.pi])
-    ranges = {name: [float(figures.low[j] * scale[j]), float(figures.high[j] * scale[j])]
-              if figures.low[j] <= figures.high[j] else None for j, name in enumerate(JOINT_NAMES)}
-    timing = None
-    if figures.planned and figures.blocks:
-        dwell = sum(e.seconds for e in poses.events if isinstance(e, Dwell))
-        timing = {
-            "cycle_time_s": figures.time + dwell,
-            "dwell_time_s": dwell,
-            "rapid_time_s": figures.rapid_time,
-            **figures.budget,
-            "time_per_tool_s": {str(t): figures.time_per_tool[t] for t in sorted(figures.time_per_tool)},
-            "largest_ratio_to_limit": {name: dict(zip(("velocity", "acceleration", "jerk"),
-                                                      map(float, figures.ratios[:, j]), strict=True))
-                                       for j, name in enumerate(JOINT_NAMES)},
-        }
-    return {
-        "source": poses.source,
-        "dialect": poses.dialect,
-        "machine": machine.source,
-        "verne_post": __version__,
-        "ok": not violations,
-        "violations": [{"line": v.line, "kind": v.kind, "message": v.message} for v in violations],
-        "warnings": warnings,
-        "points": {"cl": len(poses), "inserted": figures.inserted, "blocks": figures.blocks,
-                   "in_pole_cone": figures.in_pole_cone},
-        "largest_axis_deviation_in_pole_cone_deg": float(np.degrees(figures.cone_deviation)),
-        "joint_ranges": ranges,
-        "joint_units": {"rho1": "mm", "rho2": "mm", "rho3": "mm", "theta1": "deg", "theta2": "deg"},
-        "smallest_margins": {name: _finite(figures.margins[name]) for name in _MARGINS},
-        "path_length_mm": {"feed": figures.feed_length, "rapid": figures.rapid_length},
-        "estimated_time_s": figures.time,
-        "tolerances": {"tip_mm": options.tol, "axis_deg": options.axis_tol, "arc_mm": options.arc_tol},
-        "tools": [{"tool": t.number, "length_mm": t.length, "delta_mm": t.delta, "line": t.line,
-                   "length_from": t.source} for t in poses.tools],
-        "timing": timing,
-        "work_offset_mm": list(placement.offset if placement else _offset(machine, options)),
-        "placement": None if placement is None else placement.to_dict(),
-        "seconds": seconds,
-    }
 
 
 @dataclass
@@ -204,51 +104,8 @@ class PostResult:
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
-        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures(machine),
+        return report(machine, options, self.poses, self.violations, self.warnings, self.figures(machine),
                        self.placement, self.seconds)
-
-
-def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
-    """Seconds per block before time-parametrisation: programmed feed, never faster than a joint.
-
-    Feed blocks take their Cartesian length over the programmed feed (inverse-time moves their
-    share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
-    rotary-only block is never of zero duration. Rapids: the joint-limit time.
-    """
-    step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
-    joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
-    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
-    feed = poses.feed[blocks.pose]
-    previous = np.r_[0.0, blocks.fraction[:-1]]
-    share = np.where(blocks.pose == np.r_[-1, blocks.pose[:-1]], blocks.fraction - previous, blocks.fraction)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cartesian = np.where(poses.inverse_time[blocks.pose], 60.0 * share / feed, 60.0 * length / feed)
-    return np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
-
-
-#: Tip speed limit (mm/s) given to the planner where the programmed one does not apply: a
-#: rotary-only inverse-time block (no tip travel) is limited by timing.rotary_feed instead.
-NO_TIP_LIMIT = 1e9
-
-
-def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
-    """Programmed tip speed limit (mm/s) of the motion into each block; inverse-time moves give
-    their length over their programmed duration."""
-    return _tip_speed(poses.feed[blocks.pose], poses.inverse_time[blocks.pose], blocks.tip, duration)
-
-
-def _tip_speed(feed: np.ndarray, inverse_time: np.ndarray, tip: np.ndarray, duration: np.ndarray) -> np.ndarray:
-    """:func:`feed_speed` of blocks with programmed ``feed`` (mm/min, or 1/min where
-    ``inverse_time``), tips (mm) and durations (s)."""
-    length = np.linalg.norm(np.diff(tip, axis=0, prepend=tip[:1]), axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = np.where((duration > 0) & (length > 0), length / duration, NO_TIP_LIMIT)
-    return np.where(inverse_time, inverse, feed / 60.0)
-
-
-def _rapid_speed(machine: Machine) -> float:
-    """mm/s: the tip speed limit of rapids (the machine file's ``safe.rapid_feed``, else none)."""
-    return NO_TIP_LIMIT if machine.safe.rapid_feed is None else machine.safe.rapid_feed / 60.0
 
 
 #: Violations gathered over the parts at most (the checks of one part report at most 10,000
@@ -258,76 +115,6 @@ MAX_VIOLATIONS = 20_000
 #: CL poses per part of a program (:func:`post`): a part ends where the machine stops, at a
 #: rapid or between feed sequences, at the last such place among this many poses.
 PART_POSES = 10_000
-
-
-@dataclass(frozen=True)
-class Timing:
-    """Stage 6 of a part: the block durations (s), the schedule they come from (None: not
-    planned, the durations then from the programmed feeds, or not kept), whether they were
-    planned, what could not be planned, the seconds the planning took, and the planner's figures
-    for the report when gathered (ratios to the limits (3, 5), the time budget in s)."""
-
-    duration: np.ndarray
-    schedule: Schedule | None = None
-    planned: bool = False
-    violations: tuple[Violation, ...] = ()
-    seconds: float = 0.0
-    ratios: np.ndarray | None = None
-    budget: dict[str, float] | None = None
-
-    def with_figures(self, joints: np.ndarray, tip: np.ndarray, speed: np.ndarray, limits: Limits,
-                     rotary_feed: float) -> Timing:
-        """With the planner's figures of the blocks (mm, rad; programmed tip speed mm/s; rad/s)."""
-        assert self.schedule is not None
-        return replace(self, ratios=limit_ratios(self.schedule, limits),
-                       budget=time_budget(self.schedule, joints, tip, speed, limits, rotary_feed))
-
-
-@dataclass(frozen=True)
-class TimingTask:
-    """What the planning of a part needs (:func:`plan_timing`), small enough to send to a
-    helper process: the part's moving blocks (mm, rad), their feeds (mm/s) and CL lines."""
-
-    joints: np.ndarray
-    tip: np.ndarray
-    rapid: np.ndarray
-    feed: np.ndarray  # as programmed: mm/min, or 1/min where inverse_time
-    inverse_time: np.ndarray
-    group: np.ndarray
-    line: np.ndarray
-    unplanned: np.ndarray  # s: the durations from the programmed feeds, where planning fails
-    limits: Limits
-    rotary_feed: float  # rad/s
-    corner: float  # rad
-    engine: Engine
-    optimize: bool  # also the third-order programme (plan_feeds)
-    workers: int
-    figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
-    rapid_speed: float = NO_TIP_LIMIT  # mm/s: the tip speed limit of rapids (machine's safe.rapid_feed)
-
-
-def plan_timing(task: TimingTask) -> Timing:
-    """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.planning.schedule.plan_program`)."""
-    start = time.perf_counter()
-    try:
-        speed = np.where(task.rapid, task.rapid_speed, _tip_speed(task.feed, task.inverse_time, task.tip,
-                                                                   task.unplanned))
-        schedule = plan_program(task.joints, task.tip, task.rapid, speed, task.group,
-                                task.limits, rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
-                                engine=task.engine, optimize=task.optimize)
-    except SequenceError as error:
-        violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
-        return Timing(task.unplanned, violations=(violation,), seconds=time.perf_counter() - start)
-    timed = Timing(schedule.duration, schedule, planned=True)
-    if task.figures:  # of the planned durations, as the HTML report's
-        timed = timed.with_figures(task.joints, task.tip, _tip_speed(task.feed, task.inverse_time, task.tip,
-                                                                     schedule.duration),
-                                   task.limits, task.rotary_feed)
-    return replace(timed, seconds=time.perf_counter() - start)
-
-
-#: Plans a part's timing: here (:func:`plan_timing`), or in a helper process (a future of it).
-Planner = Callable[[TimingTask], "Timing | Future[Timing]"]
 
 
 @dataclass(frozen=True)
@@ -460,7 +247,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
                 blocks.joints, blocks.tip, rapid, poses.feed[blocks.pose], poses.inverse_time[blocks.pose],
                 poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
-                options.planner, options.optimize, options.workers, figures, _rapid_speed(machine)))
+                options.planner, options.optimize, options.workers, figures, rapid_speed_limit(machine)))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
@@ -531,7 +318,8 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
         placement = place(machine, zero, options, progress=clock.progress)
         options = replace(options, work_offset=placement.offset)
         clock.lap("placement")
-    poses = machine_poses(toolpath, machine, work_offset=_offset(machine, options), tool_length=options.tool_length)
+    poses = machine_poses(toolpath, machine, work_offset=work_offset_in_force(machine, options),
+                          tool_length=options.tool_length)
     return poses, options, placement
 
 
@@ -574,7 +362,7 @@ class Posted:
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
-        return _report(machine, options, self.poses, self.violations, self.warnings, self.figures, self.placement,
+        return report(machine, options, self.poses, self.violations, self.warnings, self.figures, self.placement,
                        self.seconds)
 
 
@@ -615,7 +403,7 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
         verifier: Verifier | VerifierProcess | None = None
         if verify:
             settings = {"source": str(output), "tol": options.tol, "axis_tol": options.axis_tol,
-                        "work_offset": _offset(machine, options), "rapid_tol": options.rapid_tol,
+                        "work_offset": work_offset_in_force(machine, options), "rapid_tol": options.rapid_tol,
                         "top": feed_top(Reference.of(poses))}
             verifier = Verifier(machine, **settings) if verifying is None else verifying.start(**settings)
         return _post(machine, poses, options, placement, output, clock, planner, verifier, timing_figures, part_poses,
@@ -720,13 +508,6 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     return posted
 
 
-def _offset(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
-    """The work offset in force (mm): the option's, else the machine file's."""
-    offset = machine.work_offset if options.work_offset is None else options.work_offset
-    assert offset != "auto", "postprocess resolves the automatic work offset first"
-    return offset
-
-
 def _events(poses: MachinePoses) -> list[Event]:
     """The program's events, before the pose of their index."""
     events = list(poses.events)
@@ -746,7 +527,7 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
            duration: np.ndarray | None = None, events: tuple[Event, ...] = ()) -> Program:
     """The program with its header (block counts and cycle time from ``figures``); its blocks
     (mm, rad, s), if given, and their ``events``."""
-    offset = _offset(machine, options)
+    offset = work_offset_in_force(machine, options)
     header = (
         f"POSTPROCESSOR VERNE-POST {__version__}",
         f"MACHINE {machine.source} ({machine.name})",
@@ -799,7 +580,7 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
         write_program(result.program, fmt, path)
         return None
     text = program_text(result.program, fmt)
-    offset = result.placement.offset if result.placement is not None else _offset(machine, options)
+    offset = result.placement.offset if result.placement is not None else work_offset_in_force(machine, options)
     verification = verify_program(text, machine, source=str(path), against=Reference.of(result.poses),
                                   work_offset=offset, tol=options.tol, axis_tol=options.axis_tol,
                                   rapid_tol=options.rapid_tol)

@@ -157,6 +157,9 @@ class CycleSpec:
     rapto: float | None = None  # the record's RAPTO value
 
 
+# One scan, kept whole (about 100 lines): the position in the tokens, what was seen, the feed and
+# whether the form is positional are shared by every branch, and a number's meaning depends on what
+# came before it (the classic APT order); split into handlers, each would take all of that state.
 def parse_cycle(toks: list[float | str], autodesk: bool = False) -> CycleSpec:
     """Read the tokens of one ``CYCLE/`` record (numbers as float, words upper-case str).
 

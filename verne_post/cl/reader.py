@@ -52,6 +52,7 @@ from .arcs import tangent_votes
 from .dialects import DIALECTS, ArcDirection, FrameMode, detect_dialect
 from .lexer import GotoRun, Record, iter_lines, record_runs
 from .machine_functions import MAX_FEED
+from .result import toolpath_of
 from .state import MM_PER_INCH, UNIT_WORDS, ReaderState, Units, Warnings, validate_poses
 
 __all__ = ["read_cl", "read_pose_csv", "read_toolpath"]
@@ -476,8 +477,8 @@ def read_cl(
     st = reading(frame)
     if not (_FRAME_RE.search(text) and (frame or found.frames) in ("local", "apply")):
         text = ""  # the toolpath's arrays need the room
-        return st.result()
-    return _frame_by_tool_direction(st.result(), frame, found.frames, lambda other: reading(other).result())
+        return toolpath_of(st)
+    return _frame_by_tool_direction(toolpath_of(st), frame, found.frames, lambda other: toolpath_of(reading(other)))
 
 
 # Frame records whose reading (the data in the frame, or mapped by it) can turn the tool over.

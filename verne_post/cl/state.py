@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from verne_post.cl.toolpath import MOTION_KINDS, Event, Toolpath
+from verne_post.cl.toolpath import MOTION_KINDS, Event
 from verne_post.errors import CheckError, InputError
 
 from .dialects import Dialect
@@ -349,81 +349,6 @@ class ReaderState:
         return p, a
 
     # ------------------------------------------------------------------ result
-
-    def result(self) -> Toolpath:
-        n = len(self.rows)
-        if n == 0:
-            raise InputError("no motion records in file", source=self.src)
-        arr = self.rows.array()
-        tip, axis = arr[:, :3].copy(), arr[:, 3:].copy()
-        line = np.frombuffer(self.lines, dtype=np.int64).copy()
-        del arr
-        self.rows, self.lines = PoseRows(), array("q")  # read: the room goes to the arrays
-        validate_poses(tip, axis, line, self.src, "GOTO")
-        axis /= np.sqrt(np.einsum("ij,ij->i", axis, axis))[:, None]
-        starts = np.array([r[0] for r in self.runs], dtype=np.int64)
-        counts = np.diff(np.append(starts, n))
-        feed = np.repeat(np.array([r[1] for r in self.runs], dtype=float), counts)
-        inverse = np.repeat(np.array([r[2] for r in self.runs], dtype=bool), counts)
-        tool = np.repeat(np.array([r[3] for r in self.runs], dtype=np.int64), counts)
-        frame = np.repeat(np.array([r[4] for r in self.runs], dtype=np.int64), counts)
-        tip, axis = self._to_common_frame(tip, axis, frame, line)
-        tip *= self.scale
-        motion = np.zeros(n, dtype=np.int8)
-        if self.motion:
-            motion[np.fromiter(self.motion.keys(), dtype=np.int64)] = np.fromiter(self.motion.values(), dtype=np.int8)
-        rapid = motion == MOTION["rapid"]
-        for idx, f in self.feed_override.items():
-            feed[idx] = f
-            inverse[idx] = False
-        feed[rapid] = np.nan
-        inverse[rapid] = False
-        notes: tuple[str, ...] = ()
-        if self.default_feed is not None:
-            before = np.arange(n) < (n if self.first_fedrat is None else self.first_fedrat)
-            given = before & ~rapid
-            if self.feed_override:
-                given[np.fromiter(self.feed_override.keys(), dtype=np.int64)] = False
-            used = int(given.sum())
-            if used:
-                first = int(line[np.argmax(given)])
-                notes = (f"FEED {self.default_feed:g} MM/MIN FROM --feed FOR THE {used} FEED MOVES BEFORE THE FIRST "
-                         f"FEDRAT (FROM CL LINE {first})",)
-            else:
-                self.warn(None, f"--feed {self.default_feed:g} not used: a FEDRAT comes before every feed move")
-        return Toolpath(
-            source=self.src, tip=np.ascontiguousarray(tip), axis=np.ascontiguousarray(axis), line=line,
-            rapid=rapid, feed=feed, tool=tool, inverse_time=inverse,
-            events=tuple(e for e in self.events if e is not None), part_name=self.part_name, units=self.units,
-            warnings=self.warnings.lines(), dialect=self.dialect.describe(self.arc_direction), motion=motion,
-            notes=notes,
-        )  # fmt: skip
-
-    def _to_common_frame(self, tip: np.ndarray, axis: np.ndarray, frame: np.ndarray, line: np.ndarray
-                         ) -> tuple[np.ndarray, np.ndarray]:
-        """Apply the frame records as the dialect says (``apply``), or bring every ``local`` frame
-        into the first pose's frame so that one work offset places the whole part."""
-        used = sorted(set(np.unique(frame).tolist()))
-        if self.dialect.frames == "apply":
-            targets = {fid: self.frames[fid] for fid in used if fid != 0}
-        else:
-            ref = int(frame[0])
-            R0, o0 = self.frames[ref]  # the first MCS (frame 0 takes the first frame record)
-            distinct = [fid for fid in used if fid != ref and not _same_frame(self.frames[fid], (R0, o0))]
-            if distinct:
-                first = int(line[np.argmax(np.isin(frame, distinct))])
-                self.warn(first, f"{len(distinct) + 1} different machine coordinate systems (MSYS/CSYS/ORIGIN): "
-                          "later operations are transformed into the first one's frame")
-            targets = {fid: (R0.T @ self.frames[fid][0], R0.T @ (self.frames[fid][1] - o0)) for fid in distinct}
-        for fid, (R, o) in targets.items():
-            m = frame == fid
-            tip[m] = o + tip[m] @ R.T
-            axis[m] = axis[m] @ R.T
-        return tip, axis
-
-
-def _same_frame(a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> bool:
-    return bool(np.allclose(a[0], b[0], atol=1e-9) and np.allclose(a[1], b[1], atol=1e-9))
 
 
 #: Poses validated at once (bounds the temporary arrays of a long toolpath).

@@ -449,11 +449,12 @@ def _above(machine: Machine, state: State, lengths: np.ndarray, settings: SafeSe
                   settings.cone)
 
 
-def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings, *,
-                 before: Blocks | None, end: int) -> Between:
-    """The moves between cuts of a part (see the module docstring): ``blocks`` those of poses up to
-    ``end`` - 1 of the program's ``poses`` (pose indices of the whole program), ``before`` the
-    last block of the part before (None for the first part)."""
+def _moves_between(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings,
+                   before: Blocks | None) -> tuple[list[Moves], list[Blocks]]:
+    """The moves between cuts that :func:`between_cuts` makes, each from its start to its end
+    state (no legs yet): from home into the program's first pose, away from a pose before a tool
+    change or after the program's last pose, into every rapid's pose and the first pose after a
+    tool change; and the blocks that position the machine before the program, if any."""
     n = len(poses)
     ext = blocks if before is None else before.then(blocks)
     skip = 0 if before is None else 1
@@ -512,6 +513,16 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
         count = len(into)
         moves.append(Moves(start, end, lengths[pose], pose, np.zeros(count), np.ones(count), np.zeros(count, bool),
                            line))
+    return moves, extra
+
+
+def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings, *,
+                 before: Blocks | None, end: int) -> Between:
+    """The moves between cuts of a part (see the module docstring): ``blocks`` those of poses up to
+    ``end`` - 1 of the program's ``poses`` (pose indices of the whole program), ``before`` the
+    last block of the part before (None for the first part)."""
+    moves, extra = _moves_between(machine, poses, blocks, settings, before)
+    cone = settings.cone
     if not moves:
         return Between(blocks, ())
     every = Moves.join(moves)

@@ -7,7 +7,7 @@ of three sections is solved with the working-mode IK of the machine and given it
 headroom (:mod:`verne_post.checks.headroom`) and the constraint that sets it: an x-z section and a
 y-z section through the table centre (y = 0, x = 0) and a plan view (x-y) at height ``z``.
 
-    ws = verne_post.placement.workspace(machine, tool_length=60, tilt=30)
+    ws = verne_post.workspace(machine, tool_length=60, tilt=30)
     for s in ws.sections: s.u, s.v, s.headroom, s.limit   # arrays, mm and fractions
 
 :func:`plot_workspace` draws them with matplotlib (the optional ``[plot]`` extra).

@@ -31,9 +31,10 @@ from ..machine import Machine
 from ..options import PostOptions
 from ..output.atomic import atomic_write
 from ..output.trajectory import samples, tip_speed
-from ..pipeline import PostResult, feed_speed
+from ..pipeline import PostResult
 from ..placement.workspace import boundary_labels, workspace
 from ..planning.schedule import Schedule, time_budget
+from ..planning.stage import feed_speed
 from ..planning.timing import Limits
 
 #: Trajectory samples taken over the whole cycle, and display columns after decimation.

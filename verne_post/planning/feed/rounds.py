@@ -28,6 +28,9 @@ _RETRIES = ((1.0, 1.0), (0.999, 0.1), (0.99, 0.43), (0.98, 2.3), (0.97, 10.0))
 _TURN_JERK = 1.3
 _NARROWER = 0.9  # a turn's window is narrowed to its own ramp's if that is this much narrower
 
+#: Per sequence still over a limit: its worst (velocity, acceleration, jerk) ratios and where (s).
+Worst = dict[int, tuple[float, float, float, float]]
+
 
 class Planner:
     """All the sequences of a batch: grid and caps once (:func:`build_grid`), then TOPP2, filter
@@ -66,7 +69,7 @@ class Planner:
         base = self.xcap * (1.0 - 3e-4)
         x = np.zeros(n)
         active = np.arange(count)
-        worst: dict[int, tuple[float, float, float, float]] = {}
+        worst: Worst = {}
         narrowed, plateaued = np.zeros(count, bool), np.zeros(count, bool)
         scurves: dict[int, FeedPlan] = {}
         for attempt in range(self.max_refinements + 1):
@@ -107,44 +110,8 @@ class Planner:
                 failing = np.setdiff1d(failing, done)
             if not len(failing):
                 break
-            for r in failing:
-                mine = seq == r
-                top = int(np.argmax(np.max(ratios[mine], axis=1)))
-                worst[int(r)] = (*ratios[mine][top], float(where[mine][top]))
-            # Lower the caps and the acceleration bound around each violation, in proportion, over
-            # the stretch the filter window there can span (twice the erosion radius, and the
-            # neighbouring gridpoints).
-            grid = self.grid
-            nearest = np.clip(grid.search(seq, where), grid.first[seq] + 1, grid.first[seq + 1] - 1)
-            reach = 2.0 * np.maximum(self.radius[nearest], self.radius[nearest - 1])
-            lo = grid.clip(seq, grid.search(seq, where - reach, "left") - 1)
-            hi = grid.clip(seq, grid.search(seq, where + reach, "right"))
-            fx_grid = np.minimum(range_chmin(n, lo, hi, fx), 1.0)
-            fa_grid = np.minimum(range_chmin(n, lo, hi, fa), 1.0)
-            cap = np.minimum(cap, np.where(fx_grid < 1.0, fx_grid * np.maximum(x, 0.0), np.inf))
-            # A turn without cruise (feed_planner's docstring, step 4): a plateau, not a lower acceleration.
-            turns = np.array([r for r in failing if worst[int(r)][2] >= _TURN_JERK and not plateaued[r]], dtype=int)
-            if len(turns):
-                # A peak too slow to need full acceleration wants a narrower window first (the
-                # time-optimal ramp to V has w = sqrt(V / J)); its plateau comes the round after.
-                peak = peak_points(grid, x, turns)
-                ramp = np.sqrt(np.max(np.abs(self.q1[peak]) * np.sqrt(np.maximum(x[peak], 0.0))[:, None]
-                                      / self.batch.limits.jerk, axis=1))
-                narrower = (ramp < _NARROWER * self.w[turns]) & ~narrowed[turns]
-                if np.any(narrower):
-                    self.w[turns[narrower]] = ramp[narrower]
-                    narrowed[turns[narrower]] = True
-                    self._acceleration_bound()
-                    fa_grid[np.isin(grid.owner, turns[narrower])] = 1.0
-                    turns = turns[~narrower]
-            if len(turns):
-                level = np.full(count, np.nan)
-                level[turns] = plateau_levels(grid, x, turns, self.w[turns])
-                plateaued[turns] = True
-                on_plateau = np.isfinite(level)[grid.owner]
-                cap[on_plateau] = np.minimum(cap[on_plateau], level[grid.owner[on_plateau]])
-                fa_grid[on_plateau] = 1.0
-            acc_scale = acc_scale * fa_grid
+            cap, acc_scale = self._lower(failing, (where, fx, fa, seq, ratios), x, cap, acc_scale, worst, narrowed,
+                                         plateaued)
             logger.debug("feed plan round %d: %d sequences over the limits", attempt, len(failing))
             active = failing
         kinds = ("velocity or feed", "acceleration", "jerk")
@@ -161,6 +128,54 @@ class Planner:
                 results[r] = plan
         assert all(result is not None for result in results)
         return results  # type: ignore[return-value]
+
+    def _lower(self, failing: np.ndarray, excess: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+               x: np.ndarray, cap: np.ndarray, acc_scale: np.ndarray, worst: Worst,
+               narrowed: np.ndarray, plateaued: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """After a round: the caps and acceleration scales lowered around every excess of the
+        ``failing`` sequences (``excess`` as :func:`.verification.verify` finds it), a turn
+        without cruise narrowed or given a plateau; ``worst``, ``narrowed`` and ``plateaued``
+        are updated in place. Returns the new caps and acceleration scales."""
+        where, fx, fa, seq, ratios = excess
+        count, n = self.batch.count, len(self.grid.start)
+        for r in failing:
+            mine = seq == r
+            top = int(np.argmax(np.max(ratios[mine], axis=1)))
+            worst[int(r)] = (*ratios[mine][top], float(where[mine][top]))
+        # Lower the caps and the acceleration bound around each violation, in proportion, over
+        # the stretch the filter window there can span (twice the erosion radius, and the
+        # neighbouring gridpoints).
+        grid = self.grid
+        nearest = np.clip(grid.search(seq, where), grid.first[seq] + 1, grid.first[seq + 1] - 1)
+        reach = 2.0 * np.maximum(self.radius[nearest], self.radius[nearest - 1])
+        lo = grid.clip(seq, grid.search(seq, where - reach, "left") - 1)
+        hi = grid.clip(seq, grid.search(seq, where + reach, "right"))
+        fx_grid = np.minimum(range_chmin(n, lo, hi, fx), 1.0)
+        fa_grid = np.minimum(range_chmin(n, lo, hi, fa), 1.0)
+        cap = np.minimum(cap, np.where(fx_grid < 1.0, fx_grid * np.maximum(x, 0.0), np.inf))
+        # A turn without cruise (feed_planner's docstring, step 4): a plateau, not a lower acceleration.
+        turns = np.array([r for r in failing if worst[int(r)][2] >= _TURN_JERK and not plateaued[r]], dtype=int)
+        if len(turns):
+            # A peak too slow to need full acceleration wants a narrower window first (the
+            # time-optimal ramp to V has w = sqrt(V / J)); its plateau comes the round after.
+            peak = peak_points(grid, x, turns)
+            ramp = np.sqrt(np.max(np.abs(self.q1[peak]) * np.sqrt(np.maximum(x[peak], 0.0))[:, None]
+                                  / self.batch.limits.jerk, axis=1))
+            narrower = (ramp < _NARROWER * self.w[turns]) & ~narrowed[turns]
+            if np.any(narrower):
+                self.w[turns[narrower]] = ramp[narrower]
+                narrowed[turns[narrower]] = True
+                self._acceleration_bound()
+                fa_grid[np.isin(grid.owner, turns[narrower])] = 1.0
+                turns = turns[~narrower]
+        if len(turns):
+            level = np.full(count, np.nan)
+            level[turns] = plateau_levels(grid, x, turns, self.w[turns])
+            plateaued[turns] = True
+            on_plateau = np.isfinite(level)[grid.owner]
+            cap[on_plateau] = np.minimum(cap[on_plateau], level[grid.owner[on_plateau]])
+            fa_grid[on_plateau] = 1.0
+        return cap, acc_scale * fa_grid
 
     def _scurve_plans(self, seqs: np.ndarray, planned: np.ndarray) -> dict[int, FeedPlan]:
         """Verified S-curves along the paths of the sequences ``seqs`` (:func:`scurve_laws`) that

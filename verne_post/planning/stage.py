@@ -1,0 +1,133 @@
+"""The timing stage (stage 6) of a part of the program, as the pipeline runs it: the durations
+from the programmed feeds, the planning of the feed sequences and rapids (:func:`plan_timing`,
+here or in a helper process) and its result (:class:`Timing`)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..checks.limits import Violation
+from ..machine import Machine
+from ..motion.linearise import Blocks
+from ..motion.poses import MachinePoses
+from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
+from .timing import Limits
+from .topp import Engine
+
+
+def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
+    """Seconds per block before time-parametrisation: programmed feed, never faster than a joint.
+
+    Feed blocks take their Cartesian length over the programmed feed (inverse-time moves their
+    share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
+    rotary-only block is never of zero duration. Rapids: the joint-limit time.
+    """
+    step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
+    joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
+    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
+    feed = poses.feed[blocks.pose]
+    previous = np.r_[0.0, blocks.fraction[:-1]]
+    share = np.where(blocks.pose == np.r_[-1, blocks.pose[:-1]], blocks.fraction - previous, blocks.fraction)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cartesian = np.where(poses.inverse_time[blocks.pose], 60.0 * share / feed, 60.0 * length / feed)
+    return np.where(rapid, joint_time, np.fmax(np.nan_to_num(cartesian, nan=0.0), joint_time))
+
+
+#: Tip speed limit (mm/s) given to the planner where the programmed one does not apply: a
+#: rotary-only inverse-time block (no tip travel) is limited by timing.rotary_feed instead.
+NO_TIP_LIMIT = 1e9
+
+
+def feed_speed(poses: MachinePoses, blocks: Blocks, duration: np.ndarray) -> np.ndarray:
+    """Programmed tip speed limit (mm/s) of the motion into each block; inverse-time moves give
+    their length over their programmed duration."""
+    return tip_limit(poses.feed[blocks.pose], poses.inverse_time[blocks.pose], blocks.tip, duration)
+
+
+def tip_limit(feed: np.ndarray, inverse_time: np.ndarray, tip: np.ndarray, duration: np.ndarray) -> np.ndarray:
+    """:func:`feed_speed` of blocks with programmed ``feed`` (mm/min, or 1/min where
+    ``inverse_time``), tips (mm) and durations (s)."""
+    length = np.linalg.norm(np.diff(tip, axis=0, prepend=tip[:1]), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = np.where((duration > 0) & (length > 0), length / duration, NO_TIP_LIMIT)
+    return np.where(inverse_time, inverse, feed / 60.0)
+
+
+def rapid_speed_limit(machine: Machine) -> float:
+    """mm/s: the tip speed limit of rapids (the machine file's ``safe.rapid_feed``, else none)."""
+    return NO_TIP_LIMIT if machine.safe.rapid_feed is None else machine.safe.rapid_feed / 60.0
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Stage 6 of a part: the block durations (s), the schedule they come from (None: not
+    planned, the durations then from the programmed feeds, or not kept), whether they were
+    planned, what could not be planned, the seconds the planning took, and the planner's figures
+    for the report when gathered (ratios to the limits (3, 5), the time budget in s)."""
+
+    duration: np.ndarray
+    schedule: Schedule | None = None
+    planned: bool = False
+    violations: tuple[Violation, ...] = ()
+    seconds: float = 0.0
+    ratios: np.ndarray | None = None
+    budget: dict[str, float] | None = None
+
+    def with_figures(self, joints: np.ndarray, tip: np.ndarray, speed: np.ndarray, limits: Limits,
+                     rotary_feed: float) -> Timing:
+        """With the planner's figures of the blocks (mm, rad; programmed tip speed mm/s; rad/s)."""
+        assert self.schedule is not None
+        return replace(self, ratios=limit_ratios(self.schedule, limits),
+                       budget=time_budget(self.schedule, joints, tip, speed, limits, rotary_feed))
+
+
+@dataclass(frozen=True)
+class TimingTask:
+    """What the planning of a part needs (:func:`plan_timing`), small enough to send to a
+    helper process: the part's moving blocks (mm, rad), their feeds (mm/s) and CL lines."""
+
+    joints: np.ndarray
+    tip: np.ndarray
+    rapid: np.ndarray
+    feed: np.ndarray  # as programmed: mm/min, or 1/min where inverse_time
+    inverse_time: np.ndarray
+    group: np.ndarray
+    line: np.ndarray
+    unplanned: np.ndarray  # s: the durations from the programmed feeds, where planning fails
+    limits: Limits
+    rotary_feed: float  # rad/s
+    corner: float  # rad
+    engine: Engine
+    optimize: bool  # also the third-order programme (plan_feeds)
+    workers: int
+    figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
+    rapid_speed: float = NO_TIP_LIMIT  # mm/s: the tip speed limit of rapids (machine's safe.rapid_feed)
+
+
+def plan_timing(task: TimingTask) -> Timing:
+    """Stage 6 of a part (feed sequences and rapids, :func:`~verne_post.planning.schedule.plan_program`)."""
+    start = time.perf_counter()
+    try:
+        speed = np.where(task.rapid, task.rapid_speed, tip_limit(task.feed, task.inverse_time, task.tip,
+                                                                  task.unplanned))
+        schedule = plan_program(task.joints, task.tip, task.rapid, speed, task.group,
+                                task.limits, rotary_feed=task.rotary_feed, corner=task.corner, workers=task.workers,
+                                engine=task.engine, optimize=task.optimize)
+    except SequenceError as error:
+        violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
+        return Timing(task.unplanned, violations=(violation,), seconds=time.perf_counter() - start)
+    timed = Timing(schedule.duration, schedule, planned=True)
+    if task.figures:  # of the planned durations, as the HTML report's
+        timed = timed.with_figures(task.joints, task.tip, tip_limit(task.feed, task.inverse_time, task.tip,
+                                                                    schedule.duration),
+                                   task.limits, task.rotary_feed)
+    return replace(timed, seconds=time.perf_counter() - start)
+
+
+#: Plans a part's timing: here (:func:`plan_timing`), or in a helper process (a future of it).
+Planner = Callable[[TimingTask], "Timing | Future[Timing]"]
