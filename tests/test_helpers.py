@@ -21,6 +21,7 @@ import verne_post.pipeline as pipeline
 from verne_post.errors import HelperError
 from verne_post.options import PostOptions
 from verne_post.pipeline import post
+from verne_post.planning import stage
 from verne_post.planning.feed_planner import Cubics
 from verne_post.planning.schedule import SequenceError
 from verne_post.planning.timing import Limits, plan_rapid
@@ -60,7 +61,7 @@ def test_a_part_the_helper_cannot_plan_is_a_violation_as_in_one_process(tmp_path
                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """The third part's planning fails (in whichever process plans it): the same violation at the
     same CL line, the later parts not planned, nothing written."""
-    real = pipeline.plan_program
+    real = stage.plan_program
     sizes: list[int] = []
 
     def recording(joints: np.ndarray, *args: object, **kwargs: object) -> object:
@@ -68,7 +69,7 @@ def test_a_part_the_helper_cannot_plan_is_a_violation_as_in_one_process(tmp_path
         return real(joints, *args, **kwargs)
 
     machine = vp.load_machine()
-    monkeypatch.setattr(pipeline, "plan_program", recording)
+    monkeypatch.setattr(stage, "plan_program", recording)
     post(EXAMPLES / "impeller_5axis.cls", machine, PostOptions(workers=1, plan=True), None, part_poses=3000)
     third = sizes[2]
     assert sizes.count(third) == 1
@@ -78,7 +79,7 @@ def test_a_part_the_helper_cannot_plan_is_a_violation_as_in_one_process(tmp_path
             raise SequenceError("test: no plan", 5)
         return real(joints, *args, **kwargs)
 
-    monkeypatch.setattr(pipeline, "plan_program", failing)  # before the helpers fork: they have it too
+    monkeypatch.setattr(stage, "plan_program", failing)  # before the helpers fork: they have it too
     outcomes = []
     for workers in (1, 2):
         target = tmp_path / f"w{workers}.nc"
@@ -108,7 +109,7 @@ def test_a_helper_that_dies_is_one_error_and_writes_nothing(tmp_path: Path, monk
                                                             which: str) -> None:
     """A helper killed mid-run (the OOM killer, say): a one-line HelperError (exit 1), no file."""
     parent = os.getpid()
-    real_plan, real_read = pipeline.plan_program, Verifier.read
+    real_plan, real_read = stage.plan_program, Verifier.read
 
     def die_in_child(real: Callable[..., object]) -> Callable[..., object]:
         def dying(*args: object, **kwargs: object) -> object:
@@ -118,7 +119,7 @@ def test_a_helper_that_dies_is_one_error_and_writes_nothing(tmp_path: Path, monk
         return dying
 
     if which == "planning":
-        monkeypatch.setattr(pipeline, "plan_program", die_in_child(real_plan))
+        monkeypatch.setattr(stage, "plan_program", die_in_child(real_plan))
     else:
         monkeypatch.setattr(Verifier, "read", die_in_child(real_read))
     target = tmp_path / "x.nc"

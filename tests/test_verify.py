@@ -438,7 +438,7 @@ def test_tool_length_from_the_command_line_is_in_the_program(tmp_path: Path) -> 
 def test_near_finds_every_pair_within_the_radius_in_each_coordinate() -> None:
     """_near (a hashed grid) against every pair tested one by one: clusters, exact repeats, pairs
     exactly the radius apart, points on the grid's cell sides, negative and large coordinates."""
-    from verne_post.verify.verifier import _CELL, _near
+    from verne_post.verify.cl_path import _CELL, _near
 
     rng = np.random.default_rng(5)
     for _ in range(60):
@@ -463,7 +463,7 @@ def test_cl_points_take_the_earliest_block_at_or_after_the_one_before() -> None:
     last such block; -1 where none is within tolerance."""
     from types import SimpleNamespace
 
-    from verne_post.verify.verifier import _angle, _match
+    from verne_post.verify.cl_path import _angle, _match
 
     rng = np.random.default_rng(21)
     tol, axis_tol = 0.005, np.radians(0.05)
