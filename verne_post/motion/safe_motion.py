@@ -482,10 +482,10 @@ def _moves_between(machine: Machine, poses: MachinePoses, blocks: Blocks, settin
         moves.append(single(start, first, 0, 0.0, 1.0, False))
     # leaving a pose for a tool change after it, or home after the program's last pose (old tool)
     leave_to: dict[int, np.ndarray] = {}
-    for k in own[own >= skip]:
+    leaving = own[own >= skip]
+    leaving = leaving[known[leaving] & (changes[ext.pose[leaving] + 1] | (ext.pose[leaving] == n - 1))]
+    for k in leaving:  # the tool changes and the program's end: a few per program
         pose = int(ext.pose[k])
-        if not known[k] or not (changes[pose + 1] or pose == n - 1):
-            continue
         here = _state(ext, np.array([k]))
         if pose == n - 1:
             target = settings.home
