@@ -127,6 +127,12 @@ class State:
     def rows(self, index: np.ndarray) -> State:
         return State(self.result.rows(index), self.tip[index], self.axis[index])
 
+    def scatter(self, rows: np.ndarray, part: State) -> State:
+        """A copy with ``rows`` replaced by ``part``."""
+        tip, axis = self.tip.copy(), self.axis.copy()
+        tip[rows], axis[rows] = part.tip, part.axis
+        return State(self.result.scatter(rows, part.result), tip, axis)
+
     def where(self, mask: np.ndarray, other: State) -> State:
         """Rows of ``self`` where ``mask``, of ``other`` elsewhere."""
         return State(self.result.take(mask, other.result), np.where(mask[:, None], self.tip, other.tip),
@@ -507,7 +513,10 @@ def _moves_between(machine: Machine, poses: MachinePoses, blocks: Blocks, settin
         start_joints = ext.joints[into - 1].copy()
         for i in np.flatnonzero(retooled):  # the tool was changed where the move away from the cut ended
             start_joints[i] = leave_to.get(int(pose[i]), start_joints[i])
-        start = at_joints(machine, start_joints, lengths[pose], cone).where(retooled, _state(ext, into - 1))
+        start = _state(ext, into - 1)
+        if retooled.any():  # the new tool's tip and axis where the tool was changed
+            rows = np.flatnonzero(retooled)
+            start = start.scatter(rows, at_joints(machine, start_joints[rows], lengths[pose[rows]], cone))
         end = _state(ext, into)
         line = ~retooled & (_angle(start.axis, end.axis) <= settings.max_turn) & keeps_its_pair(start, end, cone)
         count = len(into)
