@@ -223,7 +223,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         blocks, rapid = blocks.rows(slice(0, k)), rapid[:k]
         blocks = replace(blocks, unresolved=blocks.unresolved[blocks.unresolved < cut])
         path = solved.rows(slice(0, cut - first))
-        between = between_cuts(machine, poses, blocks, safe, before=None if before is None else before[0], end=cut)
+        between = between_cuts(machine, poses, blocks, safe, before=None if before is None else before[0])
         blocks = between.blocks
         rapid = rapid_blocks(poses, blocks)
         rapid[0] |= first == 0  # where the machine stands before the program is unknown: position with G0

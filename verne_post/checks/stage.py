@@ -41,8 +41,7 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     lap("ik")
     blocks = linearise_poses(machine, poses, options, solved, until_failure=first_failure)
     lap("linearise")
-    between = between_cuts(machine, poses, blocks, safe_settings(machine, poses, options), before=None,
-                           end=len(poses))
+    between = between_cuts(machine, poses, blocks, safe_settings(machine, poses, options), before=None)
     blocks = between.blocks
     rapid = rapid_blocks(poses, blocks)
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0

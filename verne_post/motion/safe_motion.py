@@ -526,10 +526,10 @@ def _moves_between(machine: Machine, poses: MachinePoses, blocks: Blocks, settin
 
 
 def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings, *,
-                 before: Blocks | None, end: int) -> Between:
-    """The moves between cuts of a part (see the module docstring): ``blocks`` those of poses up to
-    ``end`` - 1 of the program's ``poses`` (pose indices of the whole program), ``before`` the
-    last block of the part before (None for the first part)."""
+                 before: Blocks | None) -> Between:
+    """The moves between cuts of a part (see the module docstring): ``blocks`` those of some poses
+    of the program's ``poses`` (pose indices of the whole program), ``before`` the last block of
+    the part before (None for the first part)."""
     moves, extra = _moves_between(machine, poses, blocks, settings, before)
     cone = settings.cone
     if not moves:
