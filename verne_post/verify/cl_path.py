@@ -313,7 +313,7 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces:
             float(np.max(np.where(judged, least_dip, 0.0), initial=0.0)))
 
 
-def run_dips(program: GcodeProgram, motion: Motion, rapid_tol: float, findings: list[Finding]) -> float | None:
+def rapid_block_dips(program: GcodeProgram, motion: Motion, rapid_tol: float, findings: list[Finding]) -> float | None:
     """Without the CL path: each rapid block (G0, or G1 marked ``(RAPID)``) judged by its largest
     dip below the lower of its two ends (mm, sampling bound included; a finding where it exceeds
     ``rapid_tol``). Returns the largest dip, None without rapid moves."""

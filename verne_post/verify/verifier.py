@@ -43,7 +43,7 @@ import numpy as np
 from ..cl.toolpath import Toolpath
 from ..errors import InputError
 from ..machine import Machine
-from .cl_path import path_findings, run_dips
+from .cl_path import path_findings, rapid_block_dips
 from .gcode_reader import GcodeProgram, ReadState, read_gcode
 from .limits import joint_speed, limit_findings, tool_lengths
 from .reference import DEFAULT_AXIS_TOL, DEFAULT_RAPID_TOL, DEFAULT_TOL, Finding, Reference
@@ -193,7 +193,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
             program, machine, reference, motion, tol, np.radians(axis_tol), findings, skip, rapid_tol,
             feed_top(reference) if top is None else top)
     else:
-        rapid_dev, rapid_dip = None, run_dips(program, motion, rapid_tol, findings)
+        rapid_dev, rapid_dip = None, rapid_block_dips(program, motion, rapid_tol, findings)
     if overlap:  # what the part before found at its last block
         findings = [f for f in findings if f.line != program.line[0]]
     x, y, z = work_offset
