@@ -450,6 +450,12 @@ def _count_values(root: yaml.Node, source: str) -> None:
 
 def load_machine(path: str | Path | None = None) -> Machine:
     """Read and validate a machine YAML file; ``None`` gives the VERNE shipped with the package."""
+    return machine_from_text(machine_text(path), DEFAULT_MACHINE if path is None else str(path))
+
+
+def machine_text(path: str | Path | None = None) -> str:
+    """The text of a machine file as written (``None``: the shipped VERNE), at most
+    :data:`MAX_FILE_BYTES`, UTF-8: what :func:`load_machine` validates and tools that edit it keep."""
     if path is None:
         raw = (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_bytes()
         source = DEFAULT_MACHINE
@@ -463,21 +469,9 @@ def load_machine(path: str | Path | None = None) -> Machine:
     if len(raw) > MAX_FILE_BYTES:
         raise InputError(f"machine file larger than {MAX_FILE_BYTES} bytes", source)
     try:
-        text = raw.decode("utf-8")
+        return raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("machine file is not UTF-8 text", source) from None
-    return machine_from_text(text, source)
-
-
-def machine_text(path: str | Path | None = None) -> str:
-    """The text of a machine file (``None``: the shipped VERNE), for tools that edit it."""
-    if path is None:
-        return (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_text(encoding="utf-8")
-    try:
-        with open(path, encoding="utf-8") as handle:
-            return handle.read(MAX_FILE_BYTES + 1)
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read machine file: {getattr(exc, 'strerror', None) or exc}", str(path)) from None
 
 
 def machine_from_text(text: str, source: str) -> Machine:
