@@ -147,10 +147,6 @@ class State:
 def _solve(machine: Machine, tip: np.ndarray, axis: np.ndarray, lengths: np.ndarray, theta2: np.ndarray,
            cone: float) -> State:
     """Working-mode IK with theta2 near ``theta2`` (rad): the state at each pose (mm, table frame)."""
-    if len(tip) == 0:
-        empty = solve_with_theta2(machine, np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), np.zeros(1), np.zeros(1),
-                                  cone)[0]
-        return State(empty.rows(np.zeros(0, int)), np.zeros((0, 3)), np.zeros((0, 3)))
     known = np.all(np.isfinite(tip), axis=1) & np.all(np.isfinite(axis), axis=1) & np.isfinite(theta2)
     if not known.all():  # a pose of nowhere (a position out of reach): unreachable, not an error
         tip, axis = np.where(known[:, None], tip, 0.0), np.where(known[:, None], axis, [0.0, 0.0, 1.0])
@@ -293,11 +289,9 @@ def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
         states.append(mid)
         keep = ~unreachable
         left, right = np.r_[left[keep], new[keep]], np.r_[new[keep], right[keep]]
-    ends = np.flatnonzero(legs.final)
-    inserted = State.join(states[2:]) if len(states) > 2 else legs.end.rows(np.zeros(0, int))
-    return Split(np.r_[np.concatenate(leg[2:]).astype(int) if len(leg) > 2 else np.zeros(0, int), ends],
-                 np.r_[np.concatenate(u[2:]) if len(u) > 2 else np.zeros(0), np.ones(len(ends))],
-                 State.join([inserted, legs.end.rows(ends)]), unresolved)
+    ends = np.flatnonzero(legs.final)  # after the inserted block ends, the legs' own ends that are blocks
+    return Split(np.concatenate([*leg[2:], ends]), np.concatenate([*u[2:], np.ones(len(ends))]),
+                 State.join([*states[2:], legs.end.rows(ends)]), unresolved)
 
 
 @dataclass(frozen=True)

@@ -152,8 +152,8 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
         planned.append((first, last, False, plan))
     rapid_ranges = feed_sequences(joints, rapid, group, limits, corner, of_rapids=True)
     # ruckig's phase-synchronised move knows no tip speed: a capped one-block rapid is planned as a feed is
-    single = [(a, b) for a, b in rapid_ranges if b == a and feed[a] >= UNCAPPED]
-    runs = [r for r in rapid_ranges if r not in single]
+    single = [a for a, b in rapid_ranges if b == a and feed[a] >= UNCAPPED]
+    runs = [(a, b) for a, b in rapid_ranges if not (b == a and feed[a] >= UNCAPPED)]
     rapid_plans = plan_feeds([(joints[a - 1:b + 1], tip[a - 1:b + 1], feed[a:b + 1]) for a, b in runs], limits,
                              angular_feed=RAPID_ANGULAR_FEED, max_turn=corner + 1e-9, jerk=True, engine=engine)
     for (first, last), plan in zip(runs, rapid_plans, strict=True):
@@ -161,7 +161,7 @@ def plan_program(joints: np.ndarray, tip: np.ndarray, rapid: np.ndarray, feed: n
             raise SequenceError(plan.reason, first if plan.index is None else first - 1 + int(plan.index))
         duration[first:last + 1] = plan.durations
         planned.append((first, last, True, plan))
-    for m, _ in single:
+    for m in single:
         plan = plan_rapid(joints[m - 1], joints[m], limits)
         duration[m] = plan.duration
         planned.append((int(m), int(m), True, plan))
