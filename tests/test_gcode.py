@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 import verne_post.output.gcode as gcode
 from verne_post.cl.toolpath import Comment, Coolant, Spindle, Stop, ToolChange
 from verne_post.errors import CheckError, OutputError
+from verne_post.output.controller import LINUXCNC, Controller
 from verne_post.output.gcode import (
     MAX_COMMENT_CHARS,
     FeedRateError,
@@ -37,6 +39,11 @@ from verne_post.verify.rs274 import (
 
 LINE_LIMIT = 252  # LinuxCNC: "Command too long" above this many characters
 TOOLS = {1: (120.0, 0.5), 12: (85.25, -1.125), 5: (60.0, 0.0)}
+
+
+def numbered(step: int) -> Controller:
+    """The default profile with block numbers from ``step`` by ``step``."""
+    return replace(LINUXCNC, block_numbers=(step, step))
 
 
 def random_program(m: int = 3000, seed: int = 7) -> Program:
@@ -201,7 +208,7 @@ def test_rs274_block_numbers_and_other_decimals(tmp_path: Path) -> None:
     rs274_exe = require_rs274()
     program = random_program(m=1500, seed=11)
     fmt = GcodeFormat(
-        linear_decimals=3, angular_decimals=2, feed_decimals=3, block_numbers=True, block_number_step=5
+        linear_decimals=3, angular_decimals=2, feed_decimals=3, controller=numbered(5)
     )
     result, path = interpret(program, fmt, tmp_path, rs274_exe)
     check_against_interpreter(program, fmt, result)
@@ -292,7 +299,7 @@ def test_numbers_fixed_decimals_and_no_negative_zero() -> None:
 
 def test_block_numbers() -> None:
     program = random_program(m=300)
-    lines = list(format_program(program, GcodeFormat(block_numbers=True, block_number_step=10)))
+    lines = list(format_program(program, GcodeFormat(controller=numbered(10))))
     numbers = []
     for ln in lines:
         if ln == "%" or ln.startswith("("):
@@ -308,7 +315,7 @@ def test_block_numbers() -> None:
 
 def test_block_numbers_across_chunks(monkeypatch: pytest.MonkeyPatch) -> None:
     program = random_program(m=300)
-    fmt = GcodeFormat(block_numbers=True, block_number_step=1)
+    fmt = GcodeFormat(controller=numbered(1))
     whole = list(format_program(program, fmt))
     monkeypatch.setattr(gcode, "_CHUNK", 7)
     assert list(format_program(program, fmt)) == whole
@@ -364,7 +371,7 @@ def test_comment_text() -> None:
 
 def test_determinism(tmp_path: Path) -> None:
     program = random_program(m=2000)
-    fmt = GcodeFormat(block_numbers=True)
+    fmt = GcodeFormat(controller=numbered(10))
     a, b = tmp_path / "a.nc", tmp_path / "b.nc"
     write_program(program, fmt, a)
     write_program(random_program(m=2000), fmt, b)

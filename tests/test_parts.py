@@ -28,7 +28,7 @@ from verne_post.verify.gcode_reader import read_gcode
 from verne_post.verify.verifier import Verifier, verify_program
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
-NUMBERED = "block_numbers: true"
+NUMBERED = "  dialect: linuxcnc\n  block_numbers: {start: 7, step: 3}\n"
 
 
 def _whole(tmp_path: Path, name: str, machine: vp.Machine, options: PostOptions) -> tuple[Path, object]:
@@ -47,8 +47,8 @@ def test_parts_write_the_program_posted_whole(tmp_path: Path, name: str, size: i
     machine = vp.load_machine()
     if numbered:
         text = (Path(vp.__file__).parent / "machines" / "verne.yaml").read_text()
-        assert "block_numbers: false" in text
-        (tmp_path / "numbered.yaml").write_text(text.replace("block_numbers: false", NUMBERED))
+        assert "  dialect: linuxcnc\n" in text
+        (tmp_path / "numbered.yaml").write_text(text.replace("  dialect: linuxcnc\n", NUMBERED))
         machine = vp.load_machine(tmp_path / "numbered.yaml")
     whole, verification = _whole(tmp_path, name, machine, PostOptions())
     target = tmp_path / "parts.nc"
@@ -58,7 +58,7 @@ def test_parts_write_the_program_posted_whole(tmp_path: Path, name: str, size: i
     assert target.read_bytes() == whole.read_bytes()
     if numbered:
         numbers = [int(n) for n in re.findall(r"^N(\d+) ", target.read_text(), re.M)]
-        assert numbers == list(range(10, 10 * len(numbers) + 1, 10))
+        assert numbers == list(range(7, 7 + 3 * len(numbers), 3))
 
 
 def test_parts_are_bounded_and_end_where_the_machine_stops(monkeypatch: pytest.MonkeyPatch) -> None:

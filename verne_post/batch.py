@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any, Literal, NamedTuple, Protocol
 from .errors import InputError, OutputError, UserError, one_line
 from .machine import DEFAULT_MACHINE, load_machine
 from .output.atomic import atomic_write, check_writable
-from .output.gcode import PREAMBLE, with_header_line
+from .output.gcode import header_end, with_header_line
 from .processes.allocator import keep_freed_memory
 from .version import __version__
 
@@ -55,7 +55,7 @@ CL_SUFFIXES = (".cls", ".cl", ".clsf", ".apt", ".aptsource", ".ncl", ".cldata")
 SUMMARY_COLUMNS = ("file", "status", "exit_code", "message", "line", "cl_points", "blocks", "cycle_time_s", "tools",
                    "seconds", "output", "hash")
 
-_HASH_LINE = re.compile(r"^(?:N\d+ )?\(BATCH HASH ([0-9a-f]{64})\)\s*$")
+_HASH_LINE = re.compile(r"^(?:\(BATCH HASH ([0-9a-f]{64})\)|; BATCH HASH ([0-9a-f]{64}))\s*$")
 
 
 @dataclass(frozen=True)
@@ -164,10 +164,11 @@ def recorded_hash(path: str | os.PathLike[str]) -> str | None:
     try:
         with open(path, encoding="ascii", errors="replace") as handle:
             for text in handle:
-                if PREAMBLE in text:  # the header ends at the preamble
+                if header_end(text):  # a header line: %, the program number or a comment
+                    if match := _HASH_LINE.match(text):
+                        return match.group(1) or match.group(2)
+                else:
                     return None
-                if match := _HASH_LINE.match(text):
-                    return match.group(1)
     except OSError:
         return None
     return None
@@ -214,6 +215,10 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
 
         try:
             loaded = load_machine(machine_path)
+            if loaded.controller.split is not None and options.output_format == "gcode":
+                raise InputError("controller.split: tool writes a program as several files; a batch writes one "
+                                 "output per input: post such a machine's parts with 'verne-post post'",
+                                 machine.name if machine is not None else None)
             post = replace(options.post, workers=1)  # the batch runs files side by side: one process each
             target = Path(folder) / ("out" + options.suffix)
 
@@ -248,7 +253,8 @@ def post_file(name: str, data: bytes, machine: MachineFile | None, options: Batc
             figures["cycle_time_s"] = cycle_time  # as the G-code header says
             if options.output_format == "gcode":
                 digest = input_hash(name, data, machine or MachineFile.read(None), options)
-                output = with_header_line(output.decode("ascii"), f"BATCH HASH {digest}").encode("ascii")
+                output = with_header_line(output.decode("ascii"), f"BATCH HASH {digest}",
+                                          loaded.controller.profile()).encode("ascii")
             return outcome("ok", output=output, report=report)
         except UserError as error:
             figures["line"] = error.line

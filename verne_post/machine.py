@@ -8,18 +8,27 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .errors import InputError
 from .kinematics import reference_pose_problem
 from .kinematics.geometry import Geometry
+from .output.controller import (
+    DIALECTS,
+    JOINT_ORDER,
+    PLACEHOLDERS,
+    SAMPLES,
+    Controller,
+    placeholders,
+    template_problem,
+)
 
 # Every number finite (YAML's .inf and .nan are refused), unknown keys refused.
 _STRICT = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, use_attribute_docstrings=True)
@@ -182,15 +191,194 @@ class Tool(BaseModel):
 class GcodeConfig(BaseModel):
     model_config = _STRICT
     linear_decimals: Annotated[int, Field(ge=0, le=8)] = 4
-    """Decimals of X Y Z (sliders, mm)."""
+    """Decimals of the sliders' words (mm)."""
     angular_decimals: Annotated[int, Field(ge=0, le=8)] = 4
-    """Decimals of A C (degrees)."""
+    """Decimals of the tilt's and rotary's words (degrees)."""
     feed_decimals: Annotated[int, Field(ge=0, le=8)] = 5
     """Decimals of F (inverse time, 1/min)."""
-    block_numbers: bool = False
-    """Write N block numbers."""
-    block_number_step: Annotated[int, Field(ge=1, le=10**6)] = 10
-    """Increment of the block numbers."""
+
+
+def _template(kind: str) -> object:
+    """A line of ``controller.<kind>``: its placeholders checked when the file is read."""
+
+    def check(text: str) -> str:
+        problem = template_problem(text, PLACEHOLDERS[kind])
+        if problem is not None:
+            raise ValueError(problem)
+        return text
+
+    return Annotated[str, Field(max_length=1000), AfterValidator(check)]
+
+
+StartLine = _template("program_start")
+EndLine = _template("program_end")
+ToolChangeLine = _template("tool_change")
+AxisLetter = Literal["X", "Y", "Z", "U", "V", "W", "A", "B", "C"]
+MCode = Annotated[int, Field(ge=0, le=999)]
+
+
+class AxesConfig(BaseModel):
+    """The address of each joint in the program (the dialect's where not given)."""
+
+    model_config = _STRICT
+    rho1: AxisLetter | None = None
+    """Slider 1 (mm)."""
+    rho2: AxisLetter | None = None
+    """Slider 2 (mm)."""
+    rho3: AxisLetter | None = None
+    """Slider 3 (mm)."""
+    theta1: AxisLetter | None = None
+    """Table tilt (degrees)."""
+    theta2: AxisLetter | None = None
+    """Rotary table (degrees)."""
+
+
+class MCodesConfig(BaseModel):
+    """M codes the program writes (the dialect's where not given): 3 is written M3."""
+
+    model_config = _STRICT
+    spindle_cw: MCode | None = None
+    """Spindle on, clockwise."""
+    spindle_ccw: MCode | None = None
+    """Spindle on, counter-clockwise."""
+    spindle_off: MCode | None = None
+    """Spindle off."""
+    coolant_flood: MCode | None = None
+    """Flood coolant (the CL's COOLNT/ON and FLOOD)."""
+    coolant_mist: MCode | None = None
+    """Mist coolant."""
+    coolant_through: MCode | None = None
+    """Coolant through the spindle (the CL's THRU)."""
+    coolant_off: MCode | None = None
+    """Coolant off."""
+    stop: MCode | None = None
+    """Program stop (the CL's STOP)."""
+    optional_stop: MCode | None = None
+    """Optional stop (the CL's OPSTOP, and optional_stop)."""
+    tool_change: MCode | None = None
+    """Tool change: the reader changes the tool at it, so every tool_change list holds it."""
+    end: MCode | None = None
+    """Program end: the reader ends the program at it (and at M2 and M30)."""
+
+
+class BlockNumbers(BaseModel):
+    """N numbers on every block (comment lines and % excepted)."""
+
+    model_config = _STRICT
+    start: Annotated[int, Field(ge=0, le=10**8)] = 10
+    """The first block's number."""
+    step: Annotated[int, Field(ge=1, le=10**6)] = 10
+    """The increment."""
+
+
+class ControllerConfig(BaseModel):
+    """The controller the program is written for: a dialect preset, and settings over it
+    (docs/controllers.md; the presets' sources in verne_post/output/controller.py)."""
+
+    model_config = _STRICT
+    dialect: Literal["linuxcnc", "fanuc", "sinumerik"] = "linuxcnc"
+    """Preset: linuxcnc (today's output), fanuc or sinumerik."""
+    axes: AxesConfig = AxesConfig()
+    """Address letter of each joint (default X Y Z A C)."""
+    comment: Literal["parentheses", "semicolon"] | None = None
+    """Comments as ( ) or after ; (default: the dialect's)."""
+    percent: bool | None = None
+    """% on the first and last lines (default: the dialect's)."""
+    program_number: Annotated[int, Field(ge=0, le=99_999_999)] | None = None
+    """The program's number: FANUC's O line, and {program} in the lines below."""
+    program_start: list[StartLine] | None = Field(default=None, max_length=100)
+    """Lines after the header comments, before the first tool change; placeholders {name} {program}."""
+    program_end: list[EndLine] | None = Field(default=None, max_length=100)
+    """Lines after the last move; placeholders {name} {program}. Must end the program (m_codes.end)."""
+    tool_change: list[ToolChangeLine] | None = Field(default=None, max_length=100)
+    """Lines of a tool change, at the tool-change position; placeholders {tool} {length} (mm) {delta} (mm)
+    {spindle} (rpm) {name} {program}. Must hold {tool} and the tool-change M code."""
+    block_numbers: BlockNumbers | bool = False
+    """N numbers: false, true (from 10 by 10), or {start, step}."""
+    optional_stop: bool = False
+    """An optional stop (M1) before every tool change but the first."""
+    max_line_length: Annotated[int, Field(ge=60, le=100_000)] | None = None
+    """Characters per line (default: the dialect's; 252 for LinuxCNC). Comments are shortened to fit."""
+    split: Literal["tool"] | None = None
+    """tool: one program file per tool, part_1_T2.nc, part_2_T5.nc, ... (each starts where the one before ends)."""
+    m_codes: MCodesConfig = MCodesConfig()
+    """M codes of spindle, coolant, stops, tool change and end (default: the dialect's)."""
+
+    def profile(self) -> Controller:
+        """The profile this section describes: the dialect's, with these settings over it."""
+        base = DIALECTS[self.dialect]
+        given = {k: v for k, v in self.axes.model_dump().items() if v is not None}
+        numbers = self.block_numbers
+        if numbers is True:
+            numbers = BlockNumbers()
+        return replace(
+            base,
+            axes=tuple(given.get(joint, letter) for joint, letter in zip(JOINT_ORDER, base.axes, strict=True)),
+            comment=self.comment or base.comment,
+            percent=base.percent if self.percent is None else self.percent,
+            program_number=self.program_number,
+            program_start=base.program_start if self.program_start is None else tuple(self.program_start),
+            program_end=base.program_end if self.program_end is None else tuple(self.program_end),
+            tool_change=base.tool_change if self.tool_change is None else tuple(self.tool_change),
+            block_numbers=(numbers.start, numbers.step) if isinstance(numbers, BlockNumbers) else None,
+            optional_stop=self.optional_stop,
+            max_line_length=self.max_line_length or base.max_line_length,
+            split=self.split,
+            m_codes=replace(base.m_codes, **{k: v for k, v in self.m_codes.model_dump().items() if v is not None}),
+        )
+
+    @model_validator(mode="after")
+    def _fits_the_reader(self) -> ControllerConfig:
+        """What verify needs to read the program back, and what is the post's alone to do."""
+        profile = self.profile()
+        if len(set(profile.axes)) != len(profile.axes):
+            raise ValueError(f"controller.axes: two joints share a letter ({' '.join(profile.axes)})")
+        m = profile.m_codes
+        lists = {"program_start": profile.program_start, "program_end": profile.end_lines,
+                 "tool_change": profile.tool_change_lines}
+        for kind, lines in lists.items():
+            given = getattr(self, kind) is not None
+            for k, line in enumerate(lines):
+                where = f"controller.{kind}.{k}" if given else f"controller.{kind} (the dialect's)"
+                if "program" in placeholders(line) and profile.program_number is None:
+                    raise ValueError(f"{where}: {{program}} needs controller.program_number")
+                moved = _axis_word(line.format(**SAMPLES), profile)
+                if moved is not None:
+                    raise ValueError(f"{where}: '{line}' moves the {moved} axis: the moves between cuts are "
+                                     f"the post's to plan and verify (positions.tool_change, positions.home)")
+                numbered = f"N{profile.block_numbers[0]} " if profile.block_numbers else ""
+                unread = _unreadable(numbered + line.format(**SAMPLES), profile)
+                if unread is not None:
+                    raise ValueError(f"{where}: verify could not read '{line}' back: {unread}")
+        words = " ".join(line.upper() for line in profile.tool_change_lines)
+        if not re.search(rf"\bM0*{m.tool_change}\b", words) or not any(
+                "tool" in placeholders(line) for line in profile.tool_change_lines):
+            raise ValueError(f"controller.tool_change: the lines must hold {{tool}} and M{m.tool_change} "
+                             f"(m_codes.tool_change), where the reader changes the tool")
+        ends = " ".join(line.upper() for line in profile.end_lines)
+        if not re.search(rf"\bM0*{m.end}\b", ends):
+            raise ValueError(f"controller.program_end: no line ends the program with M{m.end} (m_codes.end)")
+        return self
+
+
+def _unreadable(line: str, profile: Controller) -> str | None:
+    """Why the reader of programs cannot read ``line`` written with ``profile`` (None if it can)."""
+    from .verify.gcode_reader import read_gcode
+
+    try:
+        program = read_gcode(line + "\n", controller=profile)
+    except InputError as error:
+        return error.reason
+    return program.problems[0][1] if program.problems else None
+
+
+def _axis_word(line: str, profile: Controller) -> str | None:
+    """The joint an axis word of ``line`` (comments left out) would move, None if none."""
+    code = re.sub(r"\([^()]*\)|;.*", "", line).upper()
+    for letter in re.findall(r"(?<![A-Z])([A-Z])\s*[-+]?(?:\d|\.\d)", code):
+        if letter in profile.axes:
+            return JOINT_ORDER[profile.axes.index(letter)]
+    return None
 
 
 class JointPosition(BaseModel):
@@ -272,6 +460,8 @@ class Machine(BaseModel):
     """mm: part zero in the table frame (x, y, z), unless --work-offset gives one."""
     gcode: GcodeConfig = GcodeConfig()
     """Number formats of the program."""
+    controller: ControllerConfig = ControllerConfig()
+    """The controller the program is written for: dialect, axis letters, program structure."""
     timing: TimingConfig = TimingConfig()
     """Time-parametrisation settings."""
     safe: SafeConfig = SafeConfig()
@@ -330,6 +520,10 @@ class MachineProblem:
         return InputError(f"{self.path}: {self.reason}", source, self.line)
 
 
+#: Keys that have moved, and where to (the machine files of earlier versions).
+_MOVED = {("gcode", "block_numbers"): "controller.block_numbers (false, true or {start, step})",
+          ("gcode", "block_number_step"): "controller.block_numbers.step"}
+
 #: A machine-wide check names the key at fault at the start of its message (``positions.home.rho1 = ...``).
 _PATH_IN_MESSAGE = re.compile(r"^([A-Za-z_][\w]*(?:\.[\w]+)+)\b")
 
@@ -341,12 +535,13 @@ def _problems(error: ValidationError, lines: dict[tuple[str, ...], int]) -> list
         loc = tuple(str(p) for p in item["loc"])
         reason = item["msg"].removeprefix("Value error, ")
         if item["type"] == "extra_forbidden":
-            reason = "unknown key"
+            reason = f"moved to {_MOVED[loc]}" if loc in _MOVED else "unknown key"
         elif item["type"] == "missing":
             reason = "missing (required)"
         named = _PATH_IN_MESSAGE.match(reason)
-        if not loc and named:
+        if named and tuple(named.group(1).split("."))[:len(loc)] == loc:  # a deeper key than the check's own
             loc = tuple(named.group(1).split("."))
+            reason = reason.removeprefix(f"{named.group(1)}: ")
         line = next((lines[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in lines), None)
         if item["type"] == "missing" and len(loc) > 1:  # a missing key: the line of the mapping that lacks it
             line = next((lines[loc[:k]] for k in range(len(loc) - 1, 0, -1) if loc[:k] in lines), None)

@@ -21,6 +21,7 @@ program as one part and keeps its arrays (the HTML report and the timed CSV use 
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import shutil
 import tempfile
@@ -56,7 +57,15 @@ from .motion.poses import MachinePoses, machine_poses
 from .motion.safe_motion import between_cuts
 from .options import PostOptions, work_offset_in_force
 from .output.atomic import atomic_write
-from .output.gcode import GcodeFormat, GcodeWriter, Program, program_text, with_header_line, write_program, write_text
+from .output.gcode import (
+    GcodeFormat,
+    GcodeWriter,
+    Program,
+    tool_spindles,
+    write_files,
+    write_program,
+    write_text,
+)
 from .placement.search import Placement, place
 from .planning.schedule import Schedule, feed_sequences
 from .planning.stage import (
@@ -359,6 +368,7 @@ class Posted:
     parts: int
     seconds: dict[str, float] = field(default_factory=dict)
     placement: Placement | None = None
+    files: tuple[Path, ...] = ()  # the program's files, split by tool (controller.split: tool)
 
     def report(self, machine: Machine, options: PostOptions) -> dict[str, Any]:
         """Summary statistics and every violation, JSON-ready (mm, degrees, seconds)."""
@@ -442,6 +452,7 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     # the header's figures are known at the end: the head is verified with those of an empty program
     head = writer.head(_frame(machine, poses, options, placement, Figures()))
     events, tools = _events(poses), {t.number: (t.length, t.delta) for t in poses.tools}
+    spindles = tool_spindles(events)
     figures = Figures()
     checks: list[Violation] = []
     others: list[Violation] = []
@@ -477,7 +488,8 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
                 positioning = _positioning(len(blocks.pose), part.first == 0)
                 text = "".join(writer.body(Program(blocks.joints, positioning, timed.duration[own],
                                                    poses.line[blocks.pose], _at_blocks(mine, blocks),
-                                                   tool_lengths=tools, between=part.rapid[own] & ~positioning)))
+                                                   tool_lengths=tools, between=part.rapid[own] & ~positioning,
+                                                   tool_spindle=spindles)))
                 spool.write(text)
                 clock.lap("write")
                 if verifier is not None:
@@ -496,14 +508,15 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
         posted = Posted(poses, violations, warnings, figures, verification, k + 1, clock.seconds, placement)
         before_writing(posted)
         if output is not None and not violations and (verification is None or verification.ok):
-            head = GcodeWriter(fmt).head(_frame(machine, poses, options, placement, figures))
-            if verification is not None:
-                head = with_header_line(head, verification.certificate())
+            head = GcodeWriter(fmt).head(_certified(_frame(machine, poses, options, placement, figures), verification))
             spool.seek(0)
-            with atomic_write(output) as handle:
-                handle.write(head)
-                shutil.copyfileobj(spool, handle, 1 << 20)
-                handle.write(writer.tail())
+            if fmt.controller.split == "tool":
+                posted = replace(posted, files=tuple(write_files(head, spool, writer.tail(), writer.files, output)))
+            else:
+                with atomic_write(output) as handle:
+                    handle.write(head)
+                    shutil.copyfileobj(spool, handle, 1 << 20)
+                    handle.write(writer.tail())
             clock.lap("write")
     return posted
 
@@ -534,7 +547,8 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         f"SOURCE {Path(poses.source).name}",
         f"CL DIALECT {poses.dialect}",
         *(f"CL READING {note}" for note in poses.notes),
-        "AXES X Y Z = SLIDERS RHO1 RHO2 RHO3 MM, A = TILT THETA1 DEG, C = ROTARY THETA2 DEG",
+        "AXES {} {} {} = SLIDERS RHO1 RHO2 RHO3 MM, {} = TILT THETA1 DEG, {} = ROTARY THETA2 DEG".format(
+            *machine.controller.profile().axes),
         "WORK OFFSET {:.4f} {:.4f} {:.4f} MM (PART ZERO IN THE TABLE FRAME)".format(*offset),
         *(placement.header() if placement is not None else (
             "WORK OFFSET FROM " + ("THE MACHINE FILE" if options.work_offset is None else "THE USER"),)),
@@ -548,11 +562,16 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     if blocks is None:
         return Program(np.zeros((0, 5)), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64),
-                       part_name=poses.part_name, header=header, tool_lengths=tools)
+                       part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses))
     positioning = _positioning(len(blocks.pose), True)
     return Program(joints=blocks.joints, rapid=positioning, duration=duration, line=poses.line[blocks.pose],
-                   events=events, part_name=poses.part_name, header=header, tool_lengths=tools,
+                   events=events, part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses),
                    between=None if rapid is None else rapid & ~positioning)
+
+
+def _name(poses: MachinePoses) -> str:
+    """``{name}`` of the controller's lines: the CL file's part name, else its file name without extension."""
+    return poses.part_name or Path(poses.source).stem
 
 
 def _positioning(blocks: int, start: bool) -> np.ndarray:
@@ -576,17 +595,32 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
     with the certified figures as a header line. Returns the verification (None without).
     """
     fmt = gcode_format(machine)
-    if not verify:
+    if not verify and fmt.controller.split is None:
         write_program(result.program, fmt, path)
         return None
-    text = program_text(result.program, fmt)
-    offset = result.placement.offset if result.placement is not None else work_offset_in_force(machine, options)
-    verification = verify_program(text, machine, source=str(path), against=Reference.of(result.poses),
-                                  work_offset=offset, tol=options.tol, axis_tol=options.axis_tol,
-                                  rapid_tol=options.rapid_tol)
-    if verification.ok:
-        write_text(with_header_line(text, verification.certificate()), path)
+    writer = GcodeWriter(fmt)
+    head = writer.head(result.program)
+    body = "".join(writer.body(result.program))
+    tail = writer.tail()
+    verification = None
+    if verify:
+        offset = result.placement.offset if result.placement is not None else work_offset_in_force(machine, options)
+        verification = verify_program(head + body + tail, machine, source=str(path),
+                                      against=Reference.of(result.poses), work_offset=offset, tol=options.tol,
+                                      axis_tol=options.axis_tol, rapid_tol=options.rapid_tol)
+        if not verification.ok:
+            return verification
+        head = GcodeWriter(fmt).head(_certified(result.program, verification))
+    if fmt.controller.split == "tool":
+        write_files(head, io.StringIO(body), tail, writer.files, path)
+    else:
+        write_text(head + body + tail, path)
     return verification
+
+
+def _certified(program: Program, verification: Verification | None) -> Program:
+    """``program`` with the verification's certificate as the last line of its header."""
+    return program if verification is None else replace(program, header=(*program.header, verification.certificate()))
 
 
 def write_output(result: PostResult, machine: Machine, options: PostOptions, path: str | os.PathLike[str],
@@ -606,8 +640,9 @@ def write_output(result: PostResult, machine: Machine, options: PostOptions, pat
 
 
 def gcode_format(machine: Machine) -> GcodeFormat:
+    """The number formats and the controller profile of ``machine``'s programs."""
     g = machine.gcode
-    return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, g.block_numbers, g.block_number_step)
+    return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, machine.controller.profile())
 
 
 __all__ = ["Checked", "Figures", "PostOptions", "PostResult", "Posted", "block_durations", "check_poses", "feed_speed",

@@ -11,6 +11,7 @@ import click
 from ..errors import InputError
 from ..machine import load_machine
 from ..output.atomic import atomic_write
+from ..output.controller import DIALECTS
 from .common import tool_length_option, user_errors
 from .main import main
 
@@ -57,16 +58,21 @@ def machine_schema_command(output: str | None) -> None:
 
 @machine_group.command("init")
 @click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="The machine file to write.")
+@click.option("--dialect", type=click.Choice(sorted(DIALECTS)), default="linuxcnc", show_default=True,
+              help="The controller the programs are written for (controller.dialect).")
 @user_errors
-def machine_init_command(output: str) -> None:
+def machine_init_command(output: str, dialect: str) -> None:
     """Write a fully commented machine file to start from: the VERNE as shipped (edit its geometry,
-    limits, tools, positions, then 'verne-post machine check' it)."""
+    limits, tools, positions, controller, then 'verne-post machine check' it)."""
     from ..machine import machine_text
 
     if Path(output).exists():
         raise InputError("exists already: give a new file (nothing is overwritten)", output)
+    text = machine_text(None)
+    shipped = "\n  dialect: linuxcnc\n"
+    assert shipped in text, "the shipped machine file sets controller.dialect"
     with atomic_write(output) as handle:
-        handle.write(machine_text(None))
+        handle.write(text.replace(shipped, f"\n  dialect: {dialect}\n"))
 
 
 @machine_group.command("show")

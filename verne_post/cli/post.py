@@ -140,6 +140,8 @@ def post_command(cl_file: str, output: str | None, output_format: str | None, pe
             print_findings(posted.verification, max_messages)
             click.echo(f"verne-post: {target}: the program fails its verification: nothing written", err=True)
             sys.exit(3)
+        if posted.files and not choices["quiet"]:  # controller.split: tool
+            click.echo(f"verne-post: one file per tool: {' '.join(str(f) for f in posted.files)}", err=True)
         return
     machine, options, result = run_pipeline(cl_file, **choices)
     finish(machine, options, result, report_path, choices["quiet"], max_messages)

@@ -2,17 +2,20 @@
 
 The controller drives the joints directly: ``X Y Z`` are the slider positions rho1, rho2, rho3
 (mm), ``A`` the table tilt theta1 and ``C`` the rotary table theta2 (degrees, written as they
-accumulate, never wrapped to 0..360); ``B`` is never written. The program's first move, from
-wherever the machine stands, is ``G0``; every other block is ``G1`` in inverse-time mode
-(``G93``) with an ``F`` word on every block, ``F = 60 / duration`` (1/min), the blocks of moves
-between cuts (rapids, retracts, tool changes: verne_post.motion.safe_motion) marked ``(RAPID)``. Layout::
+accumulate, never wrapped to 0..360); ``B`` is never written. Those letters, the comment style,
+the lines around the program and at tool changes, block numbers and M codes are the machine
+file's controller profile (:mod:`verne_post.output.controller`); below, the default (LinuxCNC).
+The program's first move, from wherever the machine stands, is ``G0``; every other block is
+``G1`` in inverse-time mode (``G93``) with an ``F`` word on every block, ``F = 60 / duration``
+(1/min), the blocks of moves between cuts (rapids, retracts, tool changes:
+verne_post.motion.safe_motion) marked ``(RAPID)``. Layout::
 
     %
     (PART name)
     (header lines)
-    G21 G90 G17 G40 G49 G94
+    G21 G90 G17 G40 G49 G94                   <- program_start
     (TOOL 1 LENGTH 120.0000 DELTA 0.0000)
-    T1 M6
+    T1 M6                                     <- tool_change, after M1 with optional_stop
     S12000 M3
     M8
     G0 X.. Y.. Z.. A.. C..
@@ -21,7 +24,7 @@ between cuts (rapids, retracts, tool changes: verne_post.motion.safe_motion) mar
     ...
     G1 X.. Y.. Z.. A.. C.. F..
     ...
-    M5 M9
+    M5 M9                                     <- program_end
     G94
     M30
     %
@@ -33,41 +36,46 @@ Output is deterministic (no dates). Checked against LinuxCNC's interpreter (``ve
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import re
 import unicodedata
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import IO
 
 import numpy as np
 
 from verne_post.cl.toolpath import Comment, Coolant, Dwell, Event, Spindle, Stop, ToolChange
 from verne_post.errors import CheckError
 from verne_post.output.atomic import atomic_write
+from verne_post.output.controller import LINUXCNC, Controller, Number, render
 from verne_post.output.numbers import fixed_field, scaled_int
 
 __all__ = [
     "MAX_COMMENT_CHARS",
-    "PREAMBLE",
     "RAPID_MARK",
+    "RAPID_WORD",
     "FeedRateError",
     "GcodeFormat",
     "GcodeWriter",
+    "LineLengthError",
     "Program",
     "comment_text",
+    "file_names",
     "format_program",
+    "header_end",
     "program_text",
+    "tool_spindles",
     "with_header_line",
+    "write_files",
     "write_program",
     "write_text",
 ]
 
-#: Modal preamble: mm, absolute, XY plane, no cutter compensation, no tool length offset (the
-#: tool length is already in the joints), units/min feed until the first feed block selects G93.
-PREAMBLE = "G21 G90 G17 G40 G49 G94"
-
-#: Longest comment text written (LinuxCNC rejects lines over 252 characters).
+#: Longest comment text written (and at most the profile's line length less the delimiters).
 MAX_COMMENT_CHARS = 200
 
 # Blocks formatted per numpy batch: bounds the temporary arrays (a few MB) and lets
@@ -110,18 +118,22 @@ _ASCII_FALLBACK = {
 
 @dataclass(frozen=True)
 class GcodeFormat:
-    """Number formatting and block numbering, from the machine YAML.
+    """Number formatting and the controller profile, from the machine YAML.
 
-    ``linear_decimals`` for X Y Z (mm), ``angular_decimals`` for A C (degrees), ``feed_decimals``
-    for the inverse-time F word (1/min). With ``block_numbers`` every block line (not ``%`` nor a
-    pure comment line) starts with ``N<k>``, k = step, 2*step, ...
+    ``linear_decimals`` for the sliders (mm), ``angular_decimals`` for the tilt and rotary
+    (degrees), ``feed_decimals`` for the inverse-time F word (1/min); ``controller``: axis
+    letters, comments, the program's structure, block numbers (every block line, not ``%``, the
+    program number nor a comment line, starts with ``N<k>``, k = start, start + step, ...).
     """
 
     linear_decimals: int = 4
     angular_decimals: int = 4
     feed_decimals: int = 5
-    block_numbers: bool = False
-    block_number_step: int = 10
+    controller: Controller = LINUXCNC
+
+    @property
+    def block_numbers(self) -> bool:
+        return self.controller.block_numbers is not None
 
 
 @dataclass(frozen=True)
@@ -139,6 +151,9 @@ class Program:
     - ``events``: non-motion records; ``event.index`` is the block they precede (M: at the end).
     - ``header``: provenance comment lines (no dates), e.g. ``"MACHINE verne.yaml"``.
     - ``tool_lengths``: tool -> (tool length mm, Delta mm), for the tool-change comment.
+    - ``tool_spindle``: CL line of a tool change -> the first spindle speed (rpm) programmed for
+      that tool, the ``{spindle}`` of the controller's tool-change lines (:func:`tool_spindles`).
+    - ``name``: ``{name}`` in the controller's lines (default: ``part_name``, else empty).
     """
 
     joints: np.ndarray
@@ -150,15 +165,23 @@ class Program:
     header: tuple[str, ...] = ()
     tool_lengths: dict[int, tuple[float, float]] | None = None
     between: np.ndarray | None = None
+    tool_spindle: dict[int, float] | None = None
+    name: str | None = None
 
 
 #: The comment that ends a G1 block of a move between cuts: the controller runs it as written
 #: (G93, so the planned time), and a reader tells it from a cut (verne_post.verify.gcode_reader).
-RAPID_MARK = "(RAPID)"
+#: ``(RAPID)`` with parentheses comments, ``; RAPID`` with semicolon comments.
+RAPID_WORD = "RAPID"
+RAPID_MARK = LINUXCNC.comment_line(RAPID_WORD)
 
 
 class FeedRateError(CheckError, ValueError):
     """A feed block whose inverse-time F word cannot be written (rounds to 0 or overflows)."""
+
+
+class LineLengthError(CheckError, ValueError):
+    """A line longer than the controller takes (``controller.max_line_length``)."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -211,9 +234,15 @@ def _plain(value: float, decimals: int = 2) -> str:
     return text
 
 
-def _event_lines(event: Event, program: Program, fmt: GcodeFormat) -> list[tuple[str, bool]]:
-    """G-code lines for one event as ``(text, is_block)``; comment lines are not blocks."""
+def _event_lines(event: Event, program: Program, fmt: GcodeFormat, values: dict[str, object],
+                 first_tool: bool) -> list[tuple[str, bool]]:
+    """G-code lines for one event as ``(text, is_block)``; comment lines are not blocks.
+
+    ``values``: the program's placeholders (``{name}``, ``{program}``); ``first_tool``: this is
+    the program's first tool change (no optional stop before it).
+    """
     where = f"CL line {event.line}"
+    controller, m = fmt.controller, fmt.controller.m_codes
     if isinstance(event, ToolChange):
         tool = int(event.tool)
         if tool < 0:
@@ -222,40 +251,63 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat) -> list[tuple
         if lengths is None:
             if tool != 0:
                 raise ValueError(f"{where}: no tool length given for tool {tool} (Program.tool_lengths)")
-            return [(f"T{tool} M6", True)]
+            return [(f"T{tool} M{m.tool_change}", True)]
         length, delta = lengths
         if not (np.isfinite(length) and np.isfinite(delta)):
             raise ValueError(f"{where}: tool {tool} length {length} / Delta {delta} is not finite")
         dec = fmt.linear_decimals
-        note = (f"(TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)})", False)
+        note = (_comment(f"TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)}", controller), False)
         # Tool 0: the CL file gave tool data but no tool number; T0 M6 would unload the spindle.
-        return [note] if tool == 0 else [note, (f"T{tool} M6", True)]
+        if tool == 0:
+            return [note]
+        stop = [] if first_tool or not controller.optional_stop else [(f"M{m.optional_stop}", True)]
+        spindle = (program.tool_spindle or {}).get(event.line, 0.0)
+        here = {**values, "tool": tool, "length": Number(length, dec), "delta": Number(delta, dec),
+                "spindle": Number(spindle, None)}
+        return [*stop, note, *((_line(t, here, controller, where), True) for t in controller.tool_change_lines)]
     if isinstance(event, Spindle):
         if event.direction == "OFF":
-            return [("M5", True)]
+            return [(f"M{m.spindle_off}", True)]
         rpm = float(event.rpm)
         if not (np.isfinite(rpm) and rpm > 0):
             raise ValueError(f"{where}: spindle speed {rpm} rpm must be > 0")
-        code = {"CW": "M3", "CCW": "M4"}.get(event.direction)
+        code = {"CW": m.spindle_cw, "CCW": m.spindle_ccw}.get(event.direction)
         if code is None:
             raise ValueError(f"{where}: unknown spindle direction {event.direction!r}")
-        return [(f"S{_plain(rpm)} {code}", True)]
+        return [(f"S{_plain(rpm)} M{code}", True)]
     if isinstance(event, Coolant):
-        code = {"ON": "M8", "FLOOD": "M8", "THRU": "M8", "MIST": "M7", "OFF": "M9"}.get(event.mode)
+        code = {"ON": m.coolant_flood, "FLOOD": m.coolant_flood, "THRU": m.coolant_through,
+                "MIST": m.coolant_mist, "OFF": m.coolant_off}.get(event.mode)
         if code is None:
             raise ValueError(f"{where}: unknown coolant mode {event.mode!r}")
-        return [(code, True)]
+        return [(f"M{code}", True)]
     if isinstance(event, Comment):
-        text = comment_text(event.text)
-        return [(f"({text})", False)] if text else []
+        text = _comment(event.text, controller)
+        return [(text, False)] if text else []
     if isinstance(event, Stop):
-        return [("M1" if event.optional else "M0", True)]
+        return [(f"M{m.optional_stop if event.optional else m.stop}", True)]
     if isinstance(event, Dwell):
         seconds = float(event.seconds)
         if not (np.isfinite(seconds) and seconds >= 0):
             raise ValueError(f"{where}: dwell {seconds} s must be >= 0")
         return [(f"G4 P{_plain(seconds, 3)}", True)]
     raise TypeError(f"unknown event type {type(event).__name__}")
+
+
+def _comment(text: str, controller: Controller) -> str:
+    """A comment line of ``text`` in the controller's style within its line length; empty if
+    nothing of ``text`` is left."""
+    safe = comment_text(text, min(MAX_COMMENT_CHARS, controller.max_line_length - 2))
+    return controller.comment_line(safe) if safe else ""
+
+
+def _line(template: str, values: dict[str, object], controller: Controller, where: str) -> str:
+    """A line of the profile, its placeholders filled, within the controller's line length."""
+    text = render(template, values)
+    if len(text) > controller.max_line_length - 12:  # room for a block number
+        raise LineLengthError(f"{where}: the line '{text[:40]}...' of the controller profile is {len(text)} "
+                              f"characters, more than controller.max_line_length allows")
+    return text
 
 
 # --------------------------------------------------------------------------------------------
@@ -285,7 +337,8 @@ def _motion_text(
     code[:, 1] = np.where(rapid, ord("0"), ord("1"))
     parts.append(code)
     decimals = (fmt.linear_decimals,) * 3 + (fmt.angular_decimals,) * 2
-    for k, (letter, dec) in enumerate(zip((b" X", b" Y", b" Z", b" A", b" C"), decimals, strict=True)):
+    letters = [f" {letter}".encode("ascii") for letter in fmt.controller.axes]
+    for k, (letter, dec) in enumerate(zip(letters, decimals, strict=True)):
         parts.append(fixed_field(scaled_int(joints_out[:, k], dec), dec, letter))
     feed = ~rapid
     if np.any(feed):
@@ -293,8 +346,9 @@ def _motion_text(
         f_field[rapid] = 0
         parts.append(f_field)
     if between is not None and np.any(between):
-        mark = np.zeros((n, len(RAPID_MARK) + 1), dtype=np.uint8)
-        mark[between] = np.frombuffer((" " + RAPID_MARK).encode("ascii"), dtype=np.uint8)
+        rapid_mark = " " + fmt.controller.comment_line(RAPID_WORD)
+        mark = np.zeros((n, len(rapid_mark)), dtype=np.uint8)
+        mark[between] = np.frombuffer(rapid_mark.encode("ascii"), dtype=np.uint8)
         parts.append(mark)
     parts.append(np.full((n, 1), ord("\n"), dtype=np.uint8))
     mat = np.concatenate(parts, axis=1)
@@ -314,10 +368,9 @@ def _check_format(fmt: GcodeFormat) -> None:
         value = getattr(fmt, name)
         if not (isinstance(value, (int, np.integer)) and 0 <= value <= 9):
             raise ValueError(f"GcodeFormat.{name} must be an integer 0..9, got {value!r}")
-    if fmt.block_numbers and not (
-        isinstance(fmt.block_number_step, (int, np.integer)) and fmt.block_number_step >= 1
-    ):
-        raise ValueError(f"GcodeFormat.block_number_step must be >= 1, got {fmt.block_number_step!r}")
+    numbers = fmt.controller.block_numbers
+    if numbers is not None and not (numbers[0] >= 0 and numbers[1] >= 1):
+        raise ValueError(f"block numbers must start at 0 or more and step by 1 or more, got {numbers!r}")
 
 
 def _prepare(program: Program, fmt: GcodeFormat) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -379,39 +432,64 @@ def _prepare(program: Program, fmt: GcodeFormat) -> tuple[np.ndarray, np.ndarray
 class GcodeWriter:
     """The G-code of a program a piece at a time: :meth:`head`, then :meth:`body` of one part of the
     blocks after another, then :meth:`tail`. The writer carries what runs across parts: the
-    block numbers and whether ``G93`` was written, so the text is the same however the blocks
-    are split. A whole :class:`Program` is one part (:func:`program_text`)."""
+    block numbers, whether ``G93`` was written, the tool changes so far and the placeholders of
+    the head, so the text is the same however the blocks are split. A whole :class:`Program` is
+    one part (:func:`program_text`)."""
 
     def __init__(self, fmt: GcodeFormat | None = None) -> None:
         self.fmt = fmt or GcodeFormat()
         _check_format(self.fmt)
-        self.numbered = 0  # numbered lines so far: the next one gets N (numbered + 1) * step
+        self.numbered = 0  # numbered lines so far
         self.inverse_time = False  # G93 written
+        self.tool_changes = 0  # tool changes written
+        # split: tool. The body's line where each file starts and its tool; what is in force there.
+        self.files: list[tuple[int, int]] = []
+        self.body_lines = 0  # lines of the body so far
+        self.position: np.ndarray | None = None  # the last block's end (mm, degrees)
+        self.in_force: dict[type, str] = {}  # the last spindle and coolant lines
+        self.values: dict[str, object] = {"name": "", "program": self.fmt.controller.program_number}
 
-    def _render(self, lines: list[tuple[str, bool]]) -> str:
+    def _number(self, k: np.ndarray | int) -> np.ndarray | int:
+        """The N number of the k-th numbered line (1-based)."""
+        start, step = self.fmt.controller.block_numbers or (0, 1)
+        return start + (k - 1) * step
+
+    def _render(self, lines: list[tuple[str, bool]], first: int | None = None) -> str:
+        """``lines`` as text; numbered lines from the ``first``-th on (default: the next)."""
         out = []
-        step = int(self.fmt.block_number_step)
+        numbered = self.fmt.block_numbers
+        k = self.numbered + 1 if first is None else first
         for text, is_block in lines:
-            if self.fmt.block_numbers and is_block:
-                self.numbered += 1
-                out.append(f"N{self.numbered * step} {text}\n")
+            if numbered and is_block:
+                out.append(f"N{self._number(k)} {text}\n")
+                k += 1
             else:
                 out.append(text + "\n")
+        if first is None:
+            self.numbered = k - 1
         return "".join(out)
 
     def head(self, program: Program) -> str:
-        """``%``, the part name and the ``header`` of ``program`` as comments, the preamble."""
-        head: list[tuple[str, bool]] = [("%", False)]
+        """``%``, the program number, the part name and the ``header`` of ``program`` as comments,
+        the profile's start lines."""
+        controller = self.fmt.controller
+        name = program.name if program.name is not None else program.part_name or ""
+        self.values = {"name": comment_text(name), "program": controller.program_number}
+        head: list[tuple[str, bool]] = [("%", False)] if controller.percent else []
+        if controller.program_number_line is not None and controller.program_number is not None:
+            head.append((render(controller.program_number_line, self.values), False))
         if program.part_name is not None:
-            head.append((f"({comment_text(f'PART {program.part_name}')})", False))
-        head.extend((f"({comment_text(h)})", False) for h in program.header if comment_text(h))
-        head.append((PREAMBLE, True))
+            head.append((_comment(f"PART {program.part_name}", controller), False))
+        head.extend((_comment(h, controller), False) for h in program.header if comment_text(h))
+        head.extend((_line(t, self.values, controller, "program start"), True) for t in controller.program_start)
         return self._render(head)
 
     def tail(self) -> str:
         """The end of the program (the same text however often asked for)."""
+        controller = self.fmt.controller
         numbered = self.numbered
-        text = self._render([("M5 M9", True), ("G94", True), ("M30", True)]) + "%\n"
+        end = [(_line(t, self.values, controller, "program end"), True) for t in controller.end_lines]
+        text = self._render(end) + ("%\n" if controller.percent else "")
         self.numbered = numbered
         return text
 
@@ -419,19 +497,42 @@ class GcodeWriter:
         """Validate the blocks of ``program`` (one part of a program) now, then return a generator
         of text pieces, each one or more ``\\n``-ended lines; events at index M (after the part's
         last block) come last."""
-        joints, rapid, f_scaled, _ = _prepare(program, self.fmt)
+        joints, rapid, f_scaled, line = _prepare(program, self.fmt)
+        if program.tool_spindle is None:
+            program = replace(program, tool_spindle=tool_spindles(program.events))
         between = None if program.between is None else np.asarray(program.between, bool).reshape(-1) & ~rapid
         if between is not None and between.shape[0] != joints.shape[0]:
             raise ValueError(f"Program.between has {between.shape[0]} entries for {joints.shape[0]} blocks")
         fmt = self.fmt
         m = joints.shape[0]
-        step = int(fmt.block_number_step)
         # Non-motion lines in output order, grouped by the block they precede: events in source
         # order (stable sort by index), then G93 just before the first feed block of the program.
         groups: dict[int, list[tuple[str, bool]]] = {}
-        for ev in sorted(program.events, key=lambda e: int(e.index)):
-            groups.setdefault(int(ev.index), []).extend(_event_lines(ev, program, fmt))
         feed_idx = np.flatnonzero(~rapid)
+        splits: dict[int, int] = {}  # index of a block -> the tool whose file starts before it
+        restate: dict[int, dict[type, str]] = {}  # what a new file restates after its tool change
+        for ev in sorted(program.events, key=lambda e: int(e.index)):
+            idx = int(ev.index)
+            first_tool = self.tool_changes == 0
+            lines = _event_lines(ev, program, fmt, self.values, first_tool)
+            if isinstance(ev, ToolChange) and ev.tool != 0:
+                self.tool_changes += 1
+                if fmt.controller.split == "tool" and idx not in splits:
+                    splits[idx] = int(ev.tool)
+                    if idx > 0 or self.position is not None:  # a file after the first
+                        restate[idx] = dict(self.in_force)
+            if isinstance(ev, (Spindle, Coolant)):
+                self.in_force[type(ev)] = lines[0][0]
+                restate.get(idx, {}).pop(type(ev), None)  # the CL says it again after the tool change
+            groups.setdefault(idx, []).extend(lines)
+        for idx, restated in restate.items():
+            # after its tool change, a file positions where the one before left the machine (a
+            # move of length zero when they run in turn) and selects inverse time again
+            at = joints[idx - 1] if idx > 0 else self.position
+            inverse_time = self.inverse_time or bool(feed_idx.size and feed_idx[0] < idx)
+            groups[idx].extend([*((line, True) for line in restated.values()), *self._restart(at, inverse_time)])
+        if m:
+            self.position = joints[-1]
         if feed_idx.size and not self.inverse_time:
             groups.setdefault(int(feed_idx[0]), []).append(("G93", True))
             self.inverse_time = True
@@ -445,15 +546,14 @@ class GcodeWriter:
         self.numbered += m + int(extra[-1]) if fmt.block_numbers else 0
         events_at = sorted(groups)
 
-        def render(lines: list[tuple[str, bool]], first: int) -> str:
-            out = []
-            for text, is_block in lines:
-                if fmt.block_numbers and is_block:
-                    out.append(f"N{first * step} {text}\n")
-                    first += 1
-                else:
-                    out.append(text + "\n")
-            return "".join(out)
+        counting = fmt.controller.split == "tool"
+
+        def emit(piece: str, idx: int | None = None) -> str:
+            if counting:
+                if idx in splits:  # a file starts at the first line of this group
+                    self.files.append((self.body_lines, splits[idx]))
+                self.body_lines += piece.count("\n")
+            return piece
 
         def generate() -> Iterator[str]:
             e = 0
@@ -461,24 +561,53 @@ class GcodeWriter:
                 c1 = min(c0 + _CHUNK, m)
                 numbers = None
                 if fmt.block_numbers:
-                    i = np.arange(c0, c1, dtype=np.int64)
-                    numbers = (before + extra[c0:c1] + i + 1) * step
+                    numbers = self._number(before + extra[c0:c1] + np.arange(c0, c1, dtype=np.int64) + 1)
                 text, off = _motion_text(joints[c0:c1], rapid[c0:c1], f_scaled[c0:c1], numbers, fmt,
                                          None if between is None else between[c0:c1])
+                _check_lengths(off, line[c0:c1], c0, fmt.controller)
                 prev = c0
                 while e < len(events_at) and events_at[e] < c1:
                     idx = events_at[e]
                     if idx > prev:
-                        yield text[off[prev - c0] : off[idx - c0]]
-                    yield render(groups[idx], before + (int(extra[idx - 1]) if idx > 0 else 0) + idx + 1)
+                        yield emit(text[off[prev - c0] : off[idx - c0]])
+                    yield emit(self._render(groups[idx], before + (int(extra[idx - 1]) if idx > 0 else 0) + idx + 1),
+                               idx)
                     prev = idx
                     e += 1
                 if c1 > prev:
-                    yield text[off[prev - c0] : off[c1 - c0]]
+                    yield emit(text[off[prev - c0] : off[c1 - c0]])
             if e < len(events_at):  # events after the last block
-                yield render(groups[m], before + (int(extra[m - 1]) if m else 0) + m + 1)
+                yield emit(self._render(groups[m], before + (int(extra[m - 1]) if m else 0) + m + 1), m)
 
         return generate()
+
+    def _restart(self, position: np.ndarray, inverse_time: bool) -> list[tuple[str, bool]]:
+        """``G0`` to ``position`` (mm, degrees), and ``G93`` if the program was in inverse time."""
+        text, _ = _motion_text(position[None], np.ones(1, bool), np.zeros(1, np.int64), None, self.fmt)
+        return [(text.rstrip("\n"), True), *((("G93", True),) if inverse_time else ())]
+
+
+def _check_lengths(offsets: np.ndarray, line: np.ndarray, first: int, controller: Controller) -> None:
+    """Refuse a motion block longer than the controller takes (offsets: its lines' starts)."""
+    long = np.diff(offsets) - 1 > controller.max_line_length
+    if np.any(long):
+        k = int(np.argmax(long))
+        raise LineLengthError(f"CL line {line[k]}: block {first + k} is {int(np.diff(offsets)[k]) - 1} characters, "
+                              f"more than controller.max_line_length {controller.max_line_length}")
+
+
+def tool_spindles(events: Iterable[Event]) -> dict[int, float]:
+    """CL line of each tool change -> the first spindle speed (rpm) programmed after it, before
+    the next tool change (0 if none): the ``{spindle}`` of the controller's tool-change lines."""
+    speeds: dict[int, float] = {}
+    current: int | None = None
+    for event in sorted(events, key=lambda e: int(e.index)):
+        if isinstance(event, ToolChange):
+            current = event.line
+            speeds[current] = 0.0
+        elif isinstance(event, Spindle) and current is not None and event.direction != "OFF" and not speeds[current]:
+            speeds[current] = float(event.rpm)
+    return speeds
 
 
 def _pieces(program: Program, fmt: GcodeFormat) -> Iterator[str]:
@@ -512,11 +641,58 @@ def program_text(program: Program, fmt: GcodeFormat | None = None) -> str:
     return "".join(_pieces(program, fmt or GcodeFormat()))
 
 
-def with_header_line(text: str, comment: str) -> str:
-    """Program ``text`` with ``(comment)`` as the last header line, just before the preamble."""
-    at = text.index(PREAMBLE)
-    at = text.rfind("\n", 0, at) + 1  # the start of the preamble line, before its N number if any
-    return f"{text[:at]}({comment_text(comment)})\n{text[at:]}"
+def header_end(text: str) -> int:
+    """Where the header of program ``text`` ends: the offset of its first line that is neither
+    ``%``, a program number (``O1234``) nor a comment, in any profile."""
+    at = 0
+    while at < len(text):
+        end = text.find("\n", at)
+        end = len(text) if end < 0 else end + 1
+        line = text[at:end].strip()
+        if not (line == "%" or line.startswith(("(", ";")) or _PROGRAM_NUMBER.fullmatch(line)):
+            return at
+        at = end
+    return at
+
+
+_PROGRAM_NUMBER = re.compile(r"O\d+")
+
+
+def with_header_line(text: str, comment: str, controller: Controller = LINUXCNC) -> str:
+    """Program ``text`` with ``comment`` in its header: after the line that names the post (the
+    header's first; a comment line of the profile's start lines may follow the header, so its end
+    is not where comments end), else at the end of the leading comments (:func:`header_end`)."""
+    named = re.search(r"^(?:\(|; )POSTPROCESSOR VERNE-POST\b.*\n", text[:header_end(text)], re.M)
+    at = named.end() if named else header_end(text)
+    return f"{text[:at]}{_comment(comment, controller)}\n{text[at:]}"
+
+
+def file_names(path: str | os.PathLike[str], tools: list[int]) -> list[Path]:
+    """The files of a program split by tool: ``part_1_T2.nc``, ``part_2_T5.nc``, ... beside ``path``."""
+    path = Path(path)
+    return [path.with_name(f"{path.stem}_{k}_T{tool}{path.suffix}") for k, tool in enumerate(tools, 1)]
+
+
+def write_files(head: str, body: IO[str], tail: str, files: list[tuple[int, int]],
+                path: str | os.PathLike[str]) -> list[Path]:
+    """Write a program split by tool (``controller.split: tool``) beside ``path``, atomically
+    together: every file or none. ``files``: the body line where each file starts and its tool
+    (:attr:`GcodeWriter.files`); lines before the first go into the first. Each file is the
+    ``head``, its lines of the ``body`` and the ``tail``. Returns the files, in order."""
+    starts = [line for line, _ in files][1:]
+    names = file_names(path, [tool for _, tool in files] or [0])
+    with contextlib.ExitStack() as stack:
+        handles = [stack.enter_context(atomic_write(name)) for name in names]
+        k = 0
+        handles[0].write(head)
+        for number, text in enumerate(body):
+            if k < len(starts) and number == starts[k]:
+                handles[k].write(tail)
+                k += 1
+                handles[k].write(head)
+            handles[k].write(text)
+        handles[k].write(tail)
+    return names
 
 
 def write_text(text: str, path: str | os.PathLike[str]) -> None:

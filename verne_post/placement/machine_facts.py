@@ -15,6 +15,7 @@ import numpy as np
 
 from ..api import JOINT_NAMES, forward_kinematics, inverse_kinematics, inverse_kinematics_pair
 from ..machine import Machine
+from ..output.controller import Controller
 from .workspace import Workspace, workspace
 
 _UNITS = ("mm", "mm", "mm", "deg", "deg")
@@ -56,10 +57,31 @@ def summary(machine: Machine) -> list[str]:
              f"moves between cuts: axis turns over {safe.max_turn_in_rapid:g} deg retract, safe level "
              f"{safe.clearance:g} mm above the highest feed point, rapid tip speed "
              + ("at the joint limits" if safe.rapid_feed is None else f"at most {safe.rapid_feed:g} mm/min")]
+    lines += _controller_lines(machine.controller.profile())
     if machine.calibration is not None:
         c = machine.calibration
         lines.append(f"calibrated: {c.poses} poses, residual RMS {c.rms_before:g} -> {c.rms_after:g} mm")
     return lines
+
+
+def _controller_lines(profile: Controller) -> list[str]:
+    """The controller profile in a few lines: what every program of this machine looks like."""
+    numbers = profile.block_numbers
+    structure = [
+        "axes " + " ".join(f"{joint}={letter}" for joint, letter in zip(JOINT_NAMES, profile.axes, strict=True)),
+        "comments " + ("( )" if profile.comment == "parentheses" else ";"),
+        "% lines" if profile.percent else "no % lines",
+        f"block numbers from {numbers[0]} by {numbers[1]}" if numbers else "no block numbers",
+        f"at most {profile.max_line_length} characters a line",
+    ]
+    if profile.program_number is not None:
+        structure.append(f"program number {profile.program_number}")
+    if profile.optional_stop:
+        structure.append(f"M{profile.m_codes.optional_stop} before every tool change but the first")
+    return [f"controller: {profile.dialect}; " + ", ".join(structure),
+            "  program start: " + " | ".join(profile.program_start),
+            "  tool change: " + " | ".join(profile.tool_change_lines),
+            "  program end: " + " | ".join(profile.end_lines)]
 
 
 @dataclass(frozen=True)

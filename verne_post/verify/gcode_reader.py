@@ -4,7 +4,11 @@ Independent of the writer (``gcode.py``): any plain RS-274 with the words this m
 accepted, whoever wrote it. ``X Y Z`` are the sliders rho1..3 (mm, or inch under G20), ``A`` the
 tilt theta1 and ``C`` the rotary theta2 (degrees); G0/G1 (modal), G93/G94, F, S, T, M codes,
 N numbers, ``( )`` and ``;`` comments, spaces anywhere, any letter case, blank lines, ``%``
-demarcation. The ``(TOOL n LENGTH l DELTA d)`` comment gives the length (mm) of tool n, and the
+demarcation. That is the default controller profile (LinuxCNC); another
+(:class:`~verne_post.output.controller.Controller`, the machine file's) gives other axis letters,
+comment styles, metric and inch codes, the tool-change and end M codes, FANUC's ``O`` program
+number, SINUMERIK's ``D0`` and ``TRAFOOF``: the program is read as that controller runs it.
+The ``(TOOL n LENGTH l DELTA d)`` comment gives the length (mm) of tool n, and the
 header comments ``(WORK OFFSET x y z MM ...)`` and ``(TOLERANCE t MM a DEG ...)`` what the
 program was made for. Anything this reader cannot interpret exactly (arcs, incremental
 distances, tool length offsets, parameters, expressions, other axes) is an
@@ -19,6 +23,7 @@ X, Y and Z do not move (the RS-274/NGC feed rule).
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -26,29 +31,26 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..output.controller import LINUXCNC, Controller
 
 __all__ = ["GcodeProgram", "ReadState", "ToolNote", "read_gcode"]
 
-AXES = "XYZAC"
 MM_PER_INCH = 25.4
 
 _NUMBER = r"[+-]?(?:\d+\.?\d*|\.\d+)"
 _WORD = re.compile(rf"([A-Z])({_NUMBER})")
 _BLOCK = re.compile(rf"(?:[A-Z]{_NUMBER})*")
+_BLOCK_NUMBER = re.compile(r"^N\d+")
 # A parenthesised comment, or a ";" comment to the end of the line, whichever comes first.
 #: The comment that marks a G1 block as a move between cuts (a rapid planned at the joint limits,
 #: run in inverse time as written): verne-post writes ``(RAPID)`` at the end of such blocks.
 RAPID_WORD = "RAPID"
-_COMMENT = re.compile(r"\(([^()]*)\)|;.*")
+_COMMENT = re.compile(r"\(([^()]*)\)|;(.*)")
 _TOOL_NOTE = re.compile(rf"^\s*TOOL\s+(\d+)\s+LENGTH\s+({_NUMBER})\s+DELTA\s+({_NUMBER})\s*$", re.IGNORECASE)
 _WORK_OFFSET = re.compile(rf"^\s*WORK\s+OFFSET\s+({_NUMBER})\s+({_NUMBER})\s+({_NUMBER})\b", re.IGNORECASE)
 _TOLERANCE = re.compile(rf"^\s*TOLERANCE\s+({_NUMBER})\s+MM\s+({_NUMBER})\s+DEG\b", re.IGNORECASE)
 _RAPID_TOLERANCE = re.compile(rf"\bRAPIDS\s+({_NUMBER})\s+MM\b", re.IGNORECASE)
 
-# G codes (tenths) that change nothing this reader needs beyond what it tracks: plane, cutter
-# compensation off, tool length offset off, canned cycle off, G54 (no offset in joint space),
-# path control modes, absolute distance.
-_HARMLESS_G = {170, 180, 190, 400, 490, 540, 610, 611, 640, 800, 900}
 @dataclass(frozen=True)
 class ToolNote:
     """A ``(TOOL n LENGTH l DELTA d)`` comment: G-code line, tool, length and Delta (mm)."""
@@ -102,16 +104,35 @@ class GcodeProgram:
         return len(self.line)
 
 
-_LETTERS_ALLOWED = set("NGMXYZACFSTP")
-_COLUMNS = "GXYZACF"  # the words of a row: motion mode, axes, feed
-_COLUMN_OF = np.full(256, 7, np.int64)
-_COLUMN_OF[np.frombuffer(_COLUMNS.encode(), np.uint8)] = np.arange(len(_COLUMNS))
 # Byte classes for the fast route: anything else sends the line down the word-by-word route.
 _OTHER, _SPACE, _DIGITS, _LETTER = 0, 1, 2, 3
-_BYTE_KIND = np.zeros(256, np.uint8)
-_BYTE_KIND[np.frombuffer(b" \t\n", np.uint8)] = _SPACE
-_BYTE_KIND[np.frombuffer(b"0123456789.+-", np.uint8)] = _DIGITS
-_BYTE_KIND[np.frombuffer(b"NGXYZACF", np.uint8)] = _LETTER
+
+
+@dataclass(frozen=True)
+class _Words:
+    """The words of a controller's programs: ``columns`` those of a row (motion mode, the five
+    axes in joint order, feed), ``column_of`` a byte's column (7: none, N), ``byte_kind`` the
+    fast route's byte classes."""
+
+    letters: frozenset[str]
+    columns: str
+    column_of: np.ndarray
+    byte_kind: np.ndarray
+
+    @staticmethod
+    def of(controller: Controller) -> _Words:
+        axes = "".join(controller.axes)
+        columns = f"G{axes}F"
+        column_of = np.full(256, 7, np.int64)
+        column_of[np.frombuffer(columns.encode(), np.uint8)] = np.arange(len(columns))
+        byte_kind = np.zeros(256, np.uint8)
+        byte_kind[np.frombuffer(b" \t\n", np.uint8)] = _SPACE
+        byte_kind[np.frombuffer(b"0123456789.+-", np.uint8)] = _DIGITS
+        byte_kind[np.frombuffer(f"NG{axes}F".encode(), np.uint8)] = _LETTER
+        facts = controller.reader
+        letters = frozenset("NGMFSTP" + axes + ("D" if facts.cutting_edge_off else "")
+                            + ("O" if facts.program_number else ""))
+        return _Words(letters, columns, column_of, byte_kind)
 
 
 def _code(value: str) -> int:
@@ -152,7 +173,7 @@ class ReadState:
 
 
 def read_gcode(text: str | Iterable[str], source: str = "<program>", state: ReadState | None = None,
-               final: bool = True) -> GcodeProgram:
+               final: bool = True, controller: Controller = LINUXCNC) -> GcodeProgram:
     """Read program text (one string, or its lines) into motion blocks; see the module docstring.
 
     A long program may be read a part at a time: ``state`` is the ``.state`` of the program read
@@ -172,11 +193,12 @@ def read_gcode(text: str | Iterable[str], source: str = "<program>", state: Read
     read = offset + len(lines) - (1 if text.endswith("\n") else 0)
     if state is not None and state.stop_line is not None:  # the program has ended: nothing more runs
         return _resolve(source, np.zeros((0, 7)), np.zeros(0, np.int64), np.zeros(0, np.int64),
-                        _Interpreter(source, 0, state), [], state.last_line, read, state)
+                        _Interpreter(source, 0, controller, state), [], state.last_line, read, state)
+    words = _words(controller)
     fast_line, fast_rows, blank, slow = _fast_rows(np.frombuffer(text.encode("utf-8", "replace"), np.uint8),
-                                                   len(lines))
+                                                   len(lines), words)
     first = int(np.argmax(~blank)) if (~blank).any() else len(lines)
-    reader = _Interpreter(source, -1 if state is not None else first, state)
+    reader = _Interpreter(source, -1 if state is not None else first, controller, state)
     for k in np.flatnonzero(slow):
         if not reader.read(offset + int(k) + 1, lines[k]):
             break
@@ -197,7 +219,12 @@ def read_gcode(text: str | Iterable[str], source: str = "<program>", state: Read
     return _resolve(source, table, line, rows_state, reader, problems, last_line, read, state)
 
 
-def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=8)
+def _words(controller: Controller) -> _Words:
+    return _Words.of(controller)
+
+
+def _fast_rows(data: np.ndarray, n_lines: int, words: _Words) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Lines made only of N, G0/G1, X Y Z A C and F words, read from the text's bytes at once.
 
     Returns the 0-based indices of those with a G, axis or F word, their rows (G, X, Y, Z, A, C,
@@ -210,7 +237,7 @@ def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, 
     ends = np.flatnonzero(data == 10)  # line k is data[starts[k]:ends[k]]
     starts = np.r_[0, ends + 1]
     ends = np.r_[ends, len(data)]
-    kind = _BYTE_KIND[data]
+    kind = words.byte_kind[data]
     if data.size == 0:
         return np.zeros(0, np.int64), np.zeros((0, 7)), np.ones(n_lines, bool), np.zeros(n_lines, bool)
     blank = ~np.logical_or.reduceat(kind != _SPACE, np.minimum(starts, len(data) - 1))
@@ -218,7 +245,7 @@ def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, 
     slow = np.zeros(n_lines, bool)
     slow[np.searchsorted(ends, np.flatnonzero(kind == _OTHER))] = True
     letters = np.flatnonzero(kind == _LETTER)
-    attached = _BYTE_KIND[data[np.minimum(letters + 1, len(data) - 1)]] == _DIGITS
+    attached = words.byte_kind[data[np.minimum(letters + 1, len(data) - 1)]] == _DIGITS
     slow[np.searchsorted(ends, letters[~attached | (letters + 1 == len(data))])] = True
     letters = letters[~slow[np.searchsorted(ends, letters)]]
     numbers = data.copy()
@@ -234,14 +261,14 @@ def _fast_rows(data: np.ndarray, n_lines: int) -> tuple[np.ndarray, np.ndarray, 
     word, word_line = data[letters], np.searchsorted(ends, letters)
     first = np.r_[True, word_line[1:] != word_line[:-1]]
     row = np.cumsum(first) - 1
-    cell = row * 8 + _COLUMN_OF[word]  # N words have their own column 7
+    cell = row * 8 + words.column_of[word]  # N words have their own column 7
     twice = np.bincount(cell, minlength=8 * (row[-1] + 1) if row.size else 0) > 1
     slow[word_line[twice[cell]]] = True  # a word twice in a block
     slow[word_line[(word == ord("G")) & (values != 0) & (values != 1)]] = True
     ok = ~slow[word_line] & (word != ord("N"))
     lines_with_words, row = np.unique(word_line[ok], return_inverse=True)
     rows = np.full((lines_with_words.size, 7), np.nan)
-    rows[row, _COLUMN_OF[word[ok]]] = values[ok]
+    rows[row, words.column_of[word[ok]]] = values[ok]
     return lines_with_words, rows, blank, slow & ~blank
 
 
@@ -252,8 +279,12 @@ class _Interpreter:
     (M2/M30, or a closing '%'). ``states[i]`` is the modal state after ``change_line[i - 1]``.
     """
 
-    def __init__(self, source: str, opened_at: int, state: ReadState | None = None) -> None:
+    def __init__(self, source: str, opened_at: int, controller: Controller, state: ReadState | None = None) -> None:
         self.source = source
+        self.controller, self.facts, self.words = controller, controller.reader, _words(controller)
+        m = controller.m_codes
+        self.tool_change_code = 10 * m.tool_change
+        self.end_codes = {20, 300, 10 * m.end}
         self.first_line = opened_at + 1
         self.rows: list[list[float]] = []
         self.row_line: list[int] = []
@@ -286,7 +317,7 @@ class _Interpreter:
         code = text
         if "(" in text or ")" in text or ";" in text:
             comments: list[str] = []
-            code = _COMMENT.sub(lambda match: comments.append(match.group(1) or "") or "", text)
+            code = _COMMENT.sub(lambda match: comments.append(self._comment_text(number, match)) or "", text)
             if "(" in code or ")" in code:
                 raise self.fail(number, "unbalanced or nested parenthesis in a comment")
             for comment in comments:
@@ -294,6 +325,8 @@ class _Interpreter:
             if any(c.strip().upper() == RAPID_WORD for c in comments):
                 self.marked.append(number)
         code = "".join(code.split()).upper()
+        if self.facts.keywords and _BLOCK_NUMBER.sub("", code) in self.facts.keywords:
+            return True
         if code.startswith("/"):
             raise self.fail(number, "block delete '/' is not supported: whether the block runs depends on a switch")
         if not _BLOCK.fullmatch(code):
@@ -306,7 +339,7 @@ class _Interpreter:
                 g_codes.append(_code(value))
             elif letter == "M":
                 m_codes.append(_code(value))
-            elif letter not in _LETTERS_ALLOWED:
+            elif letter not in self.words.letters:
                 unknown.append(letter + value)
             elif letter in values:
                 raise self.fail(number, f"two {letter} words in one block")
@@ -317,32 +350,44 @@ class _Interpreter:
                 values["G"] = g / 10
             elif g in (930, 940):  # LinuxCNC also sets the feed rate to zero on every G94
                 state = replace(state, inverse_time=g == 930, feed_epoch=state.feed_epoch + 1)
-            elif g in (200, 210):
-                state = replace(state, scale=MM_PER_INCH if g == 200 else 1.0)
+            elif g in self.facts.metric or g in self.facts.inch:
+                state = replace(state, scale=MM_PER_INCH if g in self.facts.inch else 1.0)
             elif g == 40:
                 if "P" not in values:
                     raise self.fail(number, "G4 dwell without P")
-            elif g not in _HARMLESS_G:
+            elif g not in self.facts.harmless:
                 raise self.fail(number, f"G{g / 10:g} is not supported: a joint-space program uses G0/G1 in "
                                         f"absolute distance (G90) without offsets")
         if unknown:  # after the G codes: "G2 is not supported" says more than "I1"
-            raise self.fail(number, f"word {unknown[0]}: the VERNE controller has no such word here (axes X Y Z "
-                                    f"A C; G0/G1 motion)")
+            raise self.fail(number, f"word {unknown[0]}: the VERNE controller has no such word here (axes "
+                                    f"{' '.join(self.controller.axes)}; G0/G1 motion)")
+        if values.get("D", 0) != 0:
+            raise self.fail(number, f"D{values['D']:g}: a tool offset would shift the axes, whose positions already "
+                                    f"hold the tool (D0 only)")
         if "T" in values:
             self.selected = int(values["T"])
-        if 60 in m_codes:
+        if self.tool_change_code in m_codes:
             state = replace(state, tool=self.selected, tool_length=self.lengths.get(self.selected, np.nan))
         if state is not self.states[-1]:
             self.states.append(state)
             self.change_line.append(number)
-        row = [values.get(letter, np.nan) for letter in _COLUMNS]
+        row = [values.get(letter, np.nan) for letter in self.words.columns]
         if not all(np.isnan(row)):
             self.rows.append(row)
             self.row_line.append(number)
-        if 20 in m_codes or 300 in m_codes:
+        if self.end_codes.intersection(m_codes):
             self.end_line = self.stop_line = number
             return False
         return True
+
+    def _comment_text(self, number: int, match: re.Match[str]) -> str:
+        """The text of a comment the controller takes as one."""
+        if match.group(1) is not None and not self.facts.parenthesis_comments:
+            raise self.fail(number, f"parentheses are not a comment on {self.controller.dialect}: "
+                                    f"its comments start with ';'")
+        if match.group(1) is None and not self.facts.semicolon_comments:
+            raise self.fail(number, f"';' is not a comment on {self.controller.dialect}: its comments are in ( )")
+        return match.group(1) if match.group(1) is not None else match.group(2)
 
     def _comment(self, number: int, comment: str, state: _State) -> _State:
         """Tool lengths and the header's work offset and tolerances."""

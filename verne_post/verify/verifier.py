@@ -134,7 +134,7 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
     and ``axis_tol`` degrees: else the program header's, else 0.005 mm and 0.05 degrees.
     Raises :class:`~verne_post.errors.InputError` for text that is not a program it can read.
     """
-    program = read_gcode(text, source)
+    program = read_gcode(text, source, controller=machine.controller.profile())
     header_tol = program.tolerance or (None, None, math.nan)
     tol = float(tol if tol is not None else header_tol[0] if header_tol[0] is not None else DEFAULT_TOL)
     axis_tol = float(axis_tol if axis_tol is not None else header_tol[1] if header_tol[1] is not None
@@ -240,7 +240,7 @@ class Verifier:
     def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
         """Verify the next part of the program (whole lines) against ``reference``, the next CL
         poses; ``final`` for the last part."""
-        program = read_gcode(text, self.source, self.state, final)
+        program = read_gcode(text, self.source, self.state, final, self.machine.controller.profile())
         self.state = program.state
         if reference is not None and self.pending is not None:
             reference = self.pending.then(reference)

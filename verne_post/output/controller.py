@@ -1,0 +1,235 @@
+"""The controller a program is written for: its dialect and the shop's settings over it.
+
+A :class:`Controller` is plain data that the G-code writer (``output.gcode``) writes with and the
+reader (``verify.gcode_reader``) reads with, so that whatever the profile, ``verify`` reads a
+program the way it was written. It comes from the ``controller:`` section of the machine file
+(``verne_post.machine.ControllerConfig``): a ``dialect`` preset, then the settings that override it.
+
+The presets, each from its vendor's documentation (what a preset does not say, it leaves as the
+RS-274 default):
+
+``linuxcnc``
+    LinuxCNC G-code reference (linuxcnc.org/docs/html/gcode/g-code.html, m-code.html) and
+    "G-code overview" (gcode/overview.html): ``( )`` and ``;`` comments, ``%`` demarcation, G21
+    mm, G93 inverse time with F in 1/min ("the F word means the move should be completed in
+    [one divided by the F number] minutes"), G49 tool length offset cancel, M3/M4/M5, M7/M8/M9,
+    M6 tool change, M1 optional stop, M30 end. O words are subroutine labels, so LinuxCNC has no
+    program number line. Lines longer than 252 characters are refused by its interpreter
+    (measured with ``rs274``, LinuxCNC 2.9). Today's output, byte for byte.
+``fanuc``
+    FANUC Series 0i-MODEL F / 30i-B Operator's Manual (B-64604EN, B-64484EN), "Program
+    configuration", "Inverse time feed (G93)": ``O`` program number after the leading ``%``,
+    ``( )`` comments (``;`` is the end-of-block code in FANUC listings, never a comment), G21
+    metric input, G93 with F the reciprocal of the block's time in minutes, G49 and G80 cancels,
+    ``T.. M6``, M30 end.
+``sinumerik``
+    SINUMERIK 840D sl / 828D Programming Manual "Fundamentals" (6FC5398-1BP40): ``;`` comments
+    (parentheses are arithmetic there), no ``%`` in a part program held by the control, G71
+    metric input, G93 "inverse-time feedrate 1/min", ``TRAFOOF`` (no kinematic transformation:
+    the program moves the machine axes themselves), tool change ``T.. M6`` then ``D0`` (the tool
+    change activates a cutting edge, whose length offset would shift the axes: our joints already
+    hold the tool), M30 end, at most 512 characters per block.
+"""
+
+from __future__ import annotations
+
+import string
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+__all__ = [
+    "DIALECTS",
+    "JOINT_ORDER",
+    "LINUXCNC",
+    "PLACEHOLDERS",
+    "SAMPLES",
+    "Controller",
+    "MCodes",
+    "ReaderFacts",
+    "placeholders",
+    "render",
+    "template_problem",
+]
+
+#: The joints in the order of a program's columns: sliders rho1..3 (mm), tilt theta1, rotary theta2 (deg).
+JOINT_ORDER = ("rho1", "rho2", "rho3", "theta1", "theta2")
+
+#: Letters an axis may be given: the linear X Y Z U V W and rotary A B C addresses of RS-274,
+#: FANUC and SINUMERIK; every other letter is a word of its own (G M N F S T O P D ...).
+AXIS_LETTERS = "XYZUVWABC"
+
+CommentStyle = Literal["parentheses", "semicolon"]
+
+
+@dataclass(frozen=True)
+class MCodes:
+    """The M codes the program writes (numbers: ``3`` is written ``M3``)."""
+
+    spindle_cw: int = 3
+    spindle_ccw: int = 4
+    spindle_off: int = 5
+    coolant_flood: int = 8
+    coolant_mist: int = 7
+    coolant_through: int = 8  # through the spindle; a shop with its own code sets it
+    coolant_off: int = 9
+    stop: int = 0
+    optional_stop: int = 1
+    tool_change: int = 6
+    end: int = 30
+
+
+@dataclass(frozen=True)
+class ReaderFacts:
+    """What a dialect's words mean to the reader, beyond RS-274's G0/G1/G93/G94/M/T/S/F/N.
+
+    G codes in tenths (G61.1 is 611), as :mod:`verne_post.verify.gcode_reader` counts them.
+    """
+
+    metric: frozenset[int] = frozenset({210})  # G21
+    inch: frozenset[int] = frozenset({200})  # G20
+    # Codes that change nothing a joint-space program needs: plane, cutter compensation off, tool
+    # length offset off, canned cycle off, the first work offset, path control, absolute distance.
+    harmless: frozenset[int] = frozenset({170, 180, 190, 400, 490, 540, 610, 611, 640, 800, 900})
+    parenthesis_comments: bool = True
+    semicolon_comments: bool = True
+    program_number: bool = False  # an O word names the program (before its first block)
+    cutting_edge_off: bool = False  # a D0 word (no tool offset) may stand in a block
+    keywords: frozenset[str] = frozenset()  # whole-line words that change nothing here (TRAFOOF)
+
+
+@dataclass(frozen=True)
+class Controller:
+    """A controller profile, everything resolved (see the module docstring and ``machine.ControllerConfig``).
+
+    - ``axes``: the address letter of each joint, in :data:`JOINT_ORDER`;
+    - ``comment``: how comments are written;
+    - ``percent``: ``%`` on the first and last lines;
+    - ``program_number`` and ``program_number_line`` (a template with ``{program}``, None where
+      the dialect has no program number line);
+    - ``program_start``, ``program_end``, ``tool_change``: line templates (:data:`PLACEHOLDERS`);
+    - ``block_numbers``: ``(start, step)`` or None;
+    - ``optional_stop``: an optional stop before every tool change but the first;
+    - ``max_line_length``: characters per line, end of line not counted;
+    - ``split``: ``"tool"`` writes one file per tool (``output.gcode.write_files``);
+    - ``m_codes``, and ``reader``: what the dialect's words mean when the program is read back.
+    """
+
+    dialect: str
+    axes: tuple[str, str, str, str, str] = ("X", "Y", "Z", "A", "C")
+    comment: CommentStyle = "parentheses"
+    percent: bool = True
+    program_number: int | None = None
+    program_number_line: str | None = None
+    program_start: tuple[str, ...] = ("G21 G90 G17 G40 G49 G94",)
+    program_end: tuple[str, ...] | None = None  # None: from the M codes (spindle and coolant off, G94, end)
+    tool_change: tuple[str, ...] | None = None  # None: T{tool} M<tool change>
+    block_numbers: tuple[int, int] | None = None
+    optional_stop: bool = False
+    max_line_length: int = 252
+    split: Literal["tool"] | None = None
+    m_codes: MCodes = field(default_factory=MCodes)
+    reader: ReaderFacts = field(default_factory=ReaderFacts)
+
+    @property
+    def end_lines(self) -> tuple[str, ...]:
+        m = self.m_codes
+        return self.program_end if self.program_end is not None else (
+            f"M{m.spindle_off} M{m.coolant_off}", "G94", f"M{m.end}")
+
+    @property
+    def tool_change_lines(self) -> tuple[str, ...]:
+        return self.tool_change if self.tool_change is not None else (f"T{{tool}} M{self.m_codes.tool_change}",)
+
+    def comment_line(self, text: str) -> str:
+        """``text`` (already made safe: ``output.gcode.comment_text``) as a comment in this style."""
+        return f"({text})" if self.comment == "parentheses" else f"; {text}"
+
+
+LINUXCNC = Controller("linuxcnc")
+
+DIALECTS: Mapping[str, Controller] = {
+    "linuxcnc": LINUXCNC,
+    "fanuc": Controller(
+        "fanuc",
+        program_number_line="O{program:04d}",
+        program_start=("G21 G90 G17 G40 G49 G80 G94",),
+        reader=replace(ReaderFacts(), semicolon_comments=False, program_number=True),
+    ),
+    "sinumerik": Controller(
+        "sinumerik",
+        comment="semicolon",
+        percent=False,
+        program_start=("TRAFOOF", "G71 G90 G17 G40 G94"),
+        tool_change=("T{tool}", "M6", "D0"),
+        max_line_length=512,
+        reader=ReaderFacts(metric=frozenset({710, 7100}), inch=frozenset({700, 7000}),
+                           harmless=frozenset({170, 180, 190, 400, 540, 600, 640, 900, 5000}),
+                           parenthesis_comments=False, cutting_edge_off=True, keywords=frozenset({"TRAFOOF"})),
+    ),
+}
+
+#: The placeholders each list of lines may use, and what they stand for: ``{tool}`` the tool
+#: number, ``{length}`` its gauge length (mm), ``{delta}`` the platform centre to its tip (mm,
+#: the paper's Delta), ``{spindle}`` the first spindle speed programmed for it (rpm, 0 if none),
+#: ``{name}`` the part's name, ``{program}`` the program number.
+PLACEHOLDERS: Mapping[str, frozenset[str]] = {
+    "program_start": frozenset({"name", "program"}),
+    "program_end": frozenset({"name", "program"}),
+    "tool_change": frozenset({"tool", "length", "delta", "spindle", "name", "program"}),
+    "program_number_line": frozenset({"program"}),
+}
+
+#: Values the placeholders are tried with when a machine file is read: a format that fails on
+#: them (``{name:d}``) fails on every program.
+SAMPLES = {"tool": 1, "length": 100.0, "delta": 100.0, "spindle": 10000.0, "name": "PART", "program": 1}
+
+
+def placeholders(template: str) -> set[str]:
+    """The placeholder names of a line that :func:`template_problem` accepted."""
+    return {name for _, name, _, _ in string.Formatter().parse(template) if name}
+
+
+def template_problem(template: str, allowed: frozenset[str]) -> str | None:
+    """Why the line ``template`` cannot be written (None if it can): a placeholder other than
+    ``allowed``, a malformed ``{``, a format that does not suit its value, a line break."""
+    if "\n" in template or "\r" in template:
+        return "a line break inside a line"
+    try:
+        names = [name for _, name, _, _ in string.Formatter().parse(template) if name is not None]
+    except ValueError as exc:
+        return f"malformed placeholder ({exc}); write {{{{ and }}}} for literal braces"
+    for name in names:
+        if name not in allowed:
+            known = " ".join(f"{{{p}}}" for p in sorted(allowed))
+            return f"unknown placeholder {{{name}}} (here: {known})"
+    try:
+        template.format(**SAMPLES)
+    except (ValueError, TypeError, IndexError, KeyError, AttributeError) as exc:
+        return f"cannot be written: {exc}"
+    return None
+
+
+class Number(float):
+    """A number for a placeholder, written as the program writes it when the line gives no format:
+    with ``decimals`` decimals, or (None) to 2 decimals without trailing zeros (a spindle speed)."""
+
+    decimals: int | None
+
+    def __new__(cls, value: float, decimals: int | None) -> Number:
+        number = super().__new__(cls, value)
+        number.decimals = decimals
+        return number
+
+    def __format__(self, spec: str) -> str:
+        if spec:
+            return format(float(self), spec)
+        text = f"{float(self):.{2 if self.decimals is None else self.decimals}f}"
+        if text.startswith("-") and not text.strip("-0."):
+            text = text[1:]
+        return text.rstrip("0").rstrip(".") if self.decimals is None and "." in text else text
+
+
+def render(template: str, values: Mapping[str, object]) -> str:
+    """The line ``template`` with its placeholders filled (checked at load: :func:`template_problem`)."""
+    return template.format(**values)
