@@ -384,3 +384,38 @@ def test_a_batch_refuses_a_machine_that_splits_by_tool(tmp_path: Path) -> None:
                                        "--machine", str(path), "--jobs", "1", "-q"])
     assert result.exit_code == 2 and "controller.split: tool writes a program as several files" in result.output
     assert not list((tmp_path / "out").glob("*.nc"))
+
+
+def test_fanuc_feeds_and_block_numbers_stay_within_its_ranges(tmp_path: Path) -> None:
+    """FANUC takes inverse-time F from 0.001 to 9999.999 and sequence numbers N1 to N99999
+    (B-62764EN 5, B-63684EN 13): a block too short for the largest F is written at it (slower),
+    the others at their planned F to 3 decimals, block numbers wrap, and the program still verifies."""
+    cl = ROOT / "examples" / "nx_variable_axis_inch.cls"
+    default = vp.load_machine(_machine_file(tmp_path, DIALECT_LINE, "default.yaml"))
+    fanuc = vp.load_machine(_machine_file(tmp_path, "  dialect: fanuc\n  program_number: 7\n"
+                                                    "  block_numbers: {start: 1, step: 50}\n"))
+    assert post(cl, default, PostOptions(), tmp_path / "default.nc").verification.ok
+    posted = post(cl, fanuc, PostOptions(), tmp_path / "fanuc.nc")
+    assert posted.verification.ok
+    text = (tmp_path / "fanuc.nc").read_text()
+    words = re.findall(r"^N\d+ G1 .* F(\S+)", text, re.M)
+    assert words and all(re.fullmatch(r"\d+\.\d{3}", f) for f in words) and max(map(float, words)) <= 9999.999
+    before = read_gcode((tmp_path / "default.nc").read_text())
+    after = read_gcode(text, controller=fanuc.controller.profile())
+    assert np.array_equal(before.joints, after.joints, equal_nan=True)
+    short = before.duration < 60 / 9999.999
+    assert short.sum() > 10  # the example has such blocks
+    assert np.allclose(after.duration[short], 60 / 9999.999)
+    timed = ~short & (before.duration > 0)  # the others: their F as planned, to 3 decimals
+    assert np.all(np.abs(60 / after.duration[timed] - 60 / before.duration[timed]) <= 0.0005 + 1e-6)
+    numbers = [int(n) for n in re.findall(r"^N(\d+) ", text, re.M)]
+    assert min(numbers) >= 1 and max(numbers) <= 99999 and len(numbers) * 50 > 99999  # wrapped
+
+
+@pytest.mark.parametrize(("controller", "reason"), [
+    ("  dialect: fanuc\n  program_number: 0\n", "fanuc takes O1 to O9999, not 0"),
+    ("  dialect: fanuc\n  program_number: 12345\n", "fanuc takes O1 to O9999, not 12345"),
+    ("  dialect: fanuc\n  block_numbers: {start: 0, step: 10}\n", "fanuc numbers blocks from N1 to N99999, not N0"),
+])
+def test_fanuc_ranges_are_checked_when_the_file_is_read(tmp_path: Path, controller: str, reason: str) -> None:
+    assert reason in _problem(tmp_path, controller)

@@ -333,6 +333,15 @@ class ControllerConfig(BaseModel):
         profile = self.profile()
         if len(set(profile.axes)) != len(profile.axes):
             raise ValueError(f"controller.axes: two joints share a letter ({' '.join(profile.axes)})")
+        numbers, allowed = profile.block_numbers, profile.max_block_number
+        if numbers is not None and allowed is not None and not 1 <= numbers[0] <= allowed:
+            raise ValueError(f"controller.block_numbers.start: {profile.dialect} numbers blocks from N1 to "
+                             f"N{allowed}, not N{numbers[0]}")
+        if profile.program_numbers is not None and profile.program_number is not None:
+            low, high = profile.program_numbers
+            if not low <= profile.program_number <= high:
+                raise ValueError(f"controller.program_number: {profile.dialect} takes O{low} to O{high}, not "
+                                 f"{profile.program_number}")
         m = profile.m_codes
         lists = {"program_start": profile.program_start, "program_end": profile.end_lines,
                  "tool_change": profile.tool_change_lines}

@@ -641,8 +641,10 @@ def write_output(result: PostResult, machine: Machine, options: PostOptions, pat
 
 def gcode_format(machine: Machine) -> GcodeFormat:
     """The number formats and the controller profile of ``machine``'s programs."""
-    g = machine.gcode
-    return GcodeFormat(g.linear_decimals, g.angular_decimals, g.feed_decimals, machine.controller.profile())
+    g, controller = machine.gcode, machine.controller.profile()
+    cap = controller.max_feed_decimals
+    feed_decimals = g.feed_decimals if cap is None else min(g.feed_decimals, cap)
+    return GcodeFormat(g.linear_decimals, g.angular_decimals, feed_decimals, controller)
 
 
 __all__ = ["Checked", "Figures", "PostOptions", "PostResult", "Posted", "block_durations", "check_poses", "feed_speed",

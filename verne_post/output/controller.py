@@ -17,18 +17,23 @@ RS-274 default):
     program number line. Lines longer than 252 characters are refused by its interpreter
     (measured with ``rs274``, LinuxCNC 2.9). Today's output, byte for byte.
 ``fanuc``
-    FANUC Series 0i-MODEL F / 30i-B Operator's Manual (B-64604EN, B-64484EN), "Program
-    configuration", "Inverse time feed (G93)": ``O`` program number after the leading ``%``,
-    ``( )`` comments (``;`` is the end-of-block code in FANUC listings, never a comment), G21
-    metric input, G93 with F the reciprocal of the block's time in minutes, G49 and G80 cancels,
-    ``T.. M6``, M30 end.
+    FANUC Series 16i/18i Operator's Manual (B-63684EN/01), 13 "Program configuration": the
+    end-of-block code is written ``;`` in FANUC's listings (so ``;`` is never a comment there),
+    comments in ``( )``, sequence numbers N1 to N99999 (N0 must not be used), program number 0
+    cannot be used (O1 to O9999 on controls of four digits); FANUC Series 16/18/160/180-MODEL C
+    Machining Center Operator's Manual (B-62764EN/01), 5 "Feed functions", inverse time (G93):
+    F is 1/time in minutes, 0.001 to 9999.999. G21 metric input, G49 and G80 cancels, ``T.. M6``,
+    M30 end.
 ``sinumerik``
-    SINUMERIK 840D sl / 828D Programming Manual "Fundamentals" (6FC5398-1BP40): ``;`` comments
-    (parentheses are arithmetic there), no ``%`` in a part program held by the control, G71
-    metric input, G93 "inverse-time feedrate 1/min", ``TRAFOOF`` (no kinematic transformation:
-    the program moves the machine axes themselves), tool change ``T.. M6`` then ``D0`` (the tool
-    change activates a cutting edge, whose length offset would shift the axes: our joints already
-    hold the tool), M30 end, at most 512 characters per block.
+    SINUMERIK ONE / 840D sl Programming Manual "NC programming" (12/2019, 6FC5398-2EP40-0BA0):
+    2.3 "``;`` comment start" (parentheses are arithmetic there); 2.2 a program held by the
+    control is named ``_N_NAME_MPF``, ``%`` only in punch-tape transfer files; 2.7 "Inverse-time
+    feedrate (G93) ... unit: rpm [1/min]; N10 G93 G01 X100 F2: the programmed path is traversed
+    in 0.5 min". G71 metric input, ``TRAFOOF`` (no kinematic transformation: the program moves
+    the machine axes themselves), tool change ``T..``, ``M6``, then ``D0`` (the tool change
+    activates a cutting edge, whose length offset would shift the axes: the joints already hold
+    the tool), M30 end. Blocks of up to 512 characters (ASSUMPTION: from the 840D manuals'
+    block-length note, not found in the 2019 edition; set max_line_length to your control's).
 """
 
 from __future__ import annotations
@@ -111,6 +116,10 @@ class Controller:
     - ``block_numbers``: ``(start, step)`` or None;
     - ``optional_stop``: an optional stop before every tool change but the first;
     - ``max_line_length``: characters per line, end of line not counted;
+    - ``max_block_number``: block numbers wrap to ``start`` beyond it (FANUC: five digits);
+    - ``max_inverse_time_feed`` (1/min) and ``max_feed_decimals``: the inverse-time F words the
+      controller takes; a block too short for the largest F is written at it, a little slower;
+    - ``program_numbers``: the range of ``program_number`` (FANUC: O1 to O9999, O0 is refused);
     - ``split``: ``"tool"`` writes one file per tool (``output.gcode.write_files``);
     - ``m_codes``, and ``reader``: what the dialect's words mean when the program is read back.
     """
@@ -127,6 +136,10 @@ class Controller:
     block_numbers: tuple[int, int] | None = None
     optional_stop: bool = False
     max_line_length: int = 252
+    max_block_number: int | None = None  # beyond it, block numbers wrap to ``start``
+    max_inverse_time_feed: float | None = None  # 1/min: a shorter block is written at this F (slower)
+    max_feed_decimals: int | None = None  # of the inverse-time F word
+    program_numbers: tuple[int, int] | None = None  # the range a program number must lie in
     split: Literal["tool"] | None = None
     m_codes: MCodes = field(default_factory=MCodes)
     reader: ReaderFacts = field(default_factory=ReaderFacts)
@@ -154,6 +167,10 @@ DIALECTS: Mapping[str, Controller] = {
         "fanuc",
         program_number_line="O{program:04d}",
         program_start=("G21 G90 G17 G40 G49 G80 G94",),
+        max_block_number=99999,
+        max_inverse_time_feed=9999.999,
+        max_feed_decimals=3,
+        program_numbers=(1, 9999),
         reader=replace(ReaderFacts(), semicolon_comments=False, program_number=True),
     ),
     "sinumerik": Controller(

@@ -368,6 +368,9 @@ def _check_format(fmt: GcodeFormat) -> None:
         value = getattr(fmt, name)
         if not (isinstance(value, (int, np.integer)) and 0 <= value <= 9):
             raise ValueError(f"GcodeFormat.{name} must be an integer 0..9, got {value!r}")
+    cap = fmt.controller.max_feed_decimals
+    if cap is not None and fmt.feed_decimals > cap:
+        raise ValueError(f"GcodeFormat.feed_decimals {fmt.feed_decimals}: {fmt.controller.dialect} takes at most {cap}")
     numbers = fmt.controller.block_numbers
     if numbers is not None and not (numbers[0] >= 0 and numbers[1] >= 1):
         raise ValueError(f"block numbers must start at 0 or more and step by 1 or more, got {numbers!r}")
@@ -407,6 +410,8 @@ def _prepare(program: Program, fmt: GcodeFormat) -> tuple[np.ndarray, np.ndarray
     if np.any(feed):
         with np.errstate(over="ignore", divide="ignore"):
             f_real = 60.0 / duration[feed] * 10.0**fmt.feed_decimals
+        if fmt.controller.max_inverse_time_feed is not None:  # the controller's largest F: a little slower
+            f_real = np.minimum(f_real, fmt.controller.max_inverse_time_feed * 10.0**fmt.feed_decimals)
         too_big = ~(f_real < _MAX_SCALED)
         if np.any(too_big):
             k = int(np.flatnonzero(feed)[np.argmax(too_big)])
@@ -450,9 +455,11 @@ class GcodeWriter:
         self.values: dict[str, object] = {"name": "", "program": self.fmt.controller.program_number}
 
     def _number(self, k: np.ndarray | int) -> np.ndarray | int:
-        """The N number of the k-th numbered line (1-based)."""
+        """The N number of the k-th numbered line (1-based), wrapped to ``start`` beyond the
+        controller's largest (FANUC: sequence numbers need not be unique nor ascending)."""
         start, step = self.fmt.controller.block_numbers or (0, 1)
-        return start + (k - 1) * step
+        largest = self.fmt.controller.max_block_number
+        return start + (k - 1) * step if largest is None else start + (k - 1) * step % (largest - start + 1)
 
     def _render(self, lines: list[tuple[str, bool]], first: int | None = None) -> str:
         """``lines`` as text; numbered lines from the ``first``-th on (default: the next)."""
