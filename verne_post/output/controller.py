@@ -11,11 +11,11 @@ RS-274 default):
 ``linuxcnc``
     LinuxCNC G-code reference (linuxcnc.org/docs/html/gcode/g-code.html, m-code.html) and
     "G-code overview" (gcode/overview.html): ``( )`` and ``;`` comments, ``%`` demarcation, G21
-    mm, G93 inverse time with F in 1/min ("the F word means the move should be completed in
-    [one divided by the F number] minutes"), G49 tool length offset cancel, M3/M4/M5, M7/M8/M9,
+    mm, G93 inverse time with F in 1/min (a block takes 1/F minutes, as ``rs274``'s canonical
+    feed rates confirm: ``verify.rs274.inverse_time_rate``), G49 tool length offset cancel, M3/M4/M5, M7/M8/M9,
     M6 tool change, M1 optional stop, M30 end. O words are subroutine labels, so LinuxCNC has no
     program number line. Lines longer than 252 characters are refused by its interpreter
-    (measured with ``rs274``, LinuxCNC 2.9). Today's output, byte for byte.
+    (measured with ``rs274`` of LinuxCNC 2.9.0~pre1, Debian 12). Today's output, byte for byte.
 ``fanuc``
     FANUC Series 16i/18i Operator's Manual (B-63684EN/01), 13 "Program configuration": the
     end-of-block code is written ``;`` in FANUC's listings (so ``;`` is never a comment there),
@@ -29,10 +29,11 @@ RS-274 default):
     2.3 "``;`` comment start" (parentheses are arithmetic there); 2.2 a program held by the
     control is named ``_N_NAME_MPF``, ``%`` only in punch-tape transfer files; 2.7 "Inverse-time
     feedrate (G93) ... unit: rpm [1/min]; N10 G93 G01 X100 F2: the programmed path is traversed
-    in 0.5 min". G71 metric input, ``TRAFOOF`` (no kinematic transformation: the program moves
-    the machine axes themselves), tool change ``T..``, ``M6``, then ``D0`` (the tool change
-    activates a cutting edge, whose length offset would shift the axes: the joints already hold
-    the tool), M30 end. Blocks of up to 512 characters (ASSUMPTION: from the 840D manuals'
+    in 0.5 min". G71 metric input. ``TRAFOOF``, "deactivates an active transformation" (840D
+    Programming Manual "Job planning", 03/2006, 6FC5398-2BP10-1BA0, 7.8): the program moves
+    the machine axes themselves, never a tool tip through TRAORI. Tool change ``T..``, ``M6``,
+    then ``D0`` (the tool change activates a cutting edge, whose length offset would shift the
+    axes: the joints already hold the tool), M30 end. Blocks of up to 512 characters (ASSUMPTION: from the 840D manuals'
     block-length note, not found in the 2019 edition; set max_line_length to your control's).
 """
 
