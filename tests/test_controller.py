@@ -164,7 +164,7 @@ def test_every_placeholder_is_filled_with_its_value(tmp_path: Path, placeholder:
         "tool": [str(t) for t in TOOLS],
         "length": [f"{length:.4f}" for length in TOOLS.values()],
         "delta": [f"{nose + length:.4f}" for length in TOOLS.values()],
-        "spindle": ["8000", "12500", "0"],  # tool 5 has no SPINDL of its own
+        "spindle": [str(SPEEDS[t]) for t in TOOLS],
         "name": ["BRACKET 7"] * 3,
         "program": ["4711"] * 3,
     }[placeholder]

@@ -189,7 +189,7 @@ DIALECTS: Mapping[str, Controller] = {
 
 #: The placeholders each list of lines may use, and what they stand for: ``{tool}`` the tool
 #: number, ``{length}`` its gauge length (mm), ``{delta}`` the platform centre to its tip (mm,
-#: the paper's Delta), ``{spindle}`` the first spindle speed programmed for it (rpm, 0 if none),
+#: the paper's Delta), ``{spindle}`` its spindle speed (rpm: ``output.gcode.tool_spindles``),
 #: ``{name}`` the part's name, ``{program}`` the program number.
 PLACEHOLDERS: Mapping[str, frozenset[str]] = {
     "program_start": frozenset({"name", "program"}),

@@ -151,8 +151,8 @@ class Program:
     - ``events``: non-motion records; ``event.index`` is the block they precede (M: at the end).
     - ``header``: provenance comment lines (no dates), e.g. ``"MACHINE verne.yaml"``.
     - ``tool_lengths``: tool -> (tool length mm, Delta mm), for the tool-change comment.
-    - ``tool_spindle``: CL line of a tool change -> the first spindle speed (rpm) programmed for
-      that tool, the ``{spindle}`` of the controller's tool-change lines (:func:`tool_spindles`).
+    - ``tool_spindle``: CL line of a tool change -> the spindle speed (rpm) of that tool, the
+      ``{spindle}`` of the controller's tool-change lines (:func:`tool_spindles`).
     - ``name``: ``{name}`` in the controller's lines (default: ``part_name``, else empty).
     """
 
@@ -604,16 +604,21 @@ def _check_lengths(offsets: np.ndarray, line: np.ndarray, first: int, controller
 
 
 def tool_spindles(events: Iterable[Event]) -> dict[int, float]:
-    """CL line of each tool change -> the first spindle speed (rpm) programmed after it, before
-    the next tool change (0 if none): the ``{spindle}`` of the controller's tool-change lines."""
+    """CL line of each tool change -> the spindle speed (rpm) of that tool: the first programmed
+    after it, before the next tool change; else the one in force (the spindle keeps it); 0 if
+    none was ever given. The ``{spindle}`` of the controller's tool-change lines."""
     speeds: dict[int, float] = {}
     current: int | None = None
+    own = False  # the current tool has a speed of its own
+    in_force = 0.0
     for event in sorted(events, key=lambda e: int(e.index)):
         if isinstance(event, ToolChange):
-            current = event.line
-            speeds[current] = 0.0
-        elif isinstance(event, Spindle) and current is not None and event.direction != "OFF" and not speeds[current]:
-            speeds[current] = float(event.rpm)
+            current, own = event.line, False
+            speeds[current] = in_force
+        elif isinstance(event, Spindle) and event.direction != "OFF":
+            in_force = float(event.rpm)
+            if current is not None and not own:
+                speeds[current], own = in_force, True
     return speeds
 
 
