@@ -11,8 +11,9 @@ RS-274 default):
 ``linuxcnc``
     LinuxCNC G-code reference (linuxcnc.org/docs/html/gcode/g-code.html, m-code.html) and
     "G-code overview" (gcode/overview.html): ``( )`` and ``;`` comments, ``%`` demarcation, G21
-    mm, G93 inverse time with F in 1/min (a block takes 1/F minutes, as ``rs274``'s canonical
-    feed rates confirm: ``verify.rs274.inverse_time_rate``), G49 tool length offset cancel, M3/M4/M5, M7/M8/M9,
+    mm, G93 inverse time: "an F word means the move should be completed in [one divided by the
+    F number] minutes" (G-codes, "G93, G94, G95"; ``rs274``'s canonical feed rates agree:
+    ``verify.rs274.inverse_time_rate``), G49 tool length offset cancel, M3/M4/M5, M7/M8/M9,
     M6 tool change, M1 optional stop, M30 end. O words are subroutine labels, so LinuxCNC has no
     program number line. Lines longer than 252 characters are refused by its interpreter
     (measured with ``rs274`` of LinuxCNC 2.9.0~pre1, Debian 12). Today's output, byte for byte.
@@ -22,7 +23,8 @@ RS-274 default):
     comments in ``( )``, sequence numbers N1 to N99999 (N0 must not be used), program number 0
     cannot be used (O1 to O9999 on controls of four digits); FANUC Series 16/18/160/180-MODEL C
     Machining Center Operator's Manual (B-62764EN/01), 5 "Feed functions", inverse time (G93):
-    F is 1/time in minutes, 0.001 to 9999.999. G21 metric input, G49 and G80 cancels, ``T.. M6``,
+    F is 1/time in minutes, 0.001 to 9999.999 (also 30i/31i/32i-A User's Manual B-63944EN/02,
+    5.3: "F_ ; Feedrate command (1/min)"). G21 metric input, G49 and G80 cancels, ``T.. M6``,
     M30 end.
 ``sinumerik``
     SINUMERIK ONE / 840D sl Programming Manual "NC programming" (12/2019, 6FC5398-2EP40-0BA0):
@@ -31,7 +33,9 @@ RS-274 default):
     feedrate (G93) ... unit: rpm [1/min]; N10 G93 G01 X100 F2: the programmed path is traversed
     in 0.5 min". G71 metric input. ``TRAFOOF``, "deactivates an active transformation" (840D
     Programming Manual "Job planning", 03/2006, 6FC5398-2BP10-1BA0, 7.8): the program moves
-    the machine axes themselves, never a tool tip through TRAORI. Tool change ``T..``, ``M6``,
+    the machine axes themselves, never a tool tip through TRAORI. Tool change ``T..``, ``M6``
+    (the tool-change M code, MD22560 TOOL_CHANGE_M_CODE, "default setting is 6": Function Manual
+    Extended Functions 03/2013, 6FC5397-1BP40-3BA1, W3),
     then ``D0`` (the tool change activates a cutting edge, whose length offset would shift the
     axes: the joints already hold the tool), M30 end. Blocks of up to 512 characters (ASSUMPTION: from the 840D manuals'
     block-length note, not found in the 2019 edition; set max_line_length to your control's).
