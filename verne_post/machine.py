@@ -351,14 +351,10 @@ class ControllerConfig(BaseModel):
                 where = f"controller.{kind}.{k}" if given else f"controller.{kind} (the dialect's)"
                 if "program" in placeholders(line) and profile.program_number is None:
                     raise ValueError(f"{where}: {{program}} needs controller.program_number")
-                moved = _axis_word(line.format(**SAMPLES), profile)
-                if moved is not None:
-                    raise ValueError(f"{where}: '{line}' moves the {moved} axis: the moves between cuts are "
-                                     f"the post's to plan and verify (positions.tool_change, positions.home)")
                 numbered = f"N{profile.block_numbers[0]} " if profile.block_numbers else ""
-                unread = _unreadable(numbered + line.format(**SAMPLES), profile)
-                if unread is not None:
-                    raise ValueError(f"{where}: verify could not read '{line}' back: {unread}")
+                problem = _read_back(line, numbered + line.format(**SAMPLES), profile)
+                if problem is not None:
+                    raise ValueError(f"{where}: {problem}")
         words = " ".join(line.upper() for line in profile.tool_change_lines)
         if not re.search(rf"\bM0*{m.tool_change}\b", words) or not any(
                 "tool" in placeholders(line) for line in profile.tool_change_lines):
@@ -370,24 +366,21 @@ class ControllerConfig(BaseModel):
         return self
 
 
-def _unreadable(line: str, profile: Controller) -> str | None:
-    """Why the reader of programs cannot read ``line`` written with ``profile`` (None if it can)."""
+def _read_back(line: str, written: str, profile: Controller) -> str | None:
+    """What is wrong with the profile's ``line`` (None if nothing), as the reader of programs
+    reads it as ``written`` (placeholders filled, block number): a move (the post's to plan and
+    verify), or a word it cannot read."""
     from .verify.gcode_reader import read_gcode
 
     try:
-        program = read_gcode(line + "\n", controller=profile)
+        program = read_gcode(written + "\n", controller=profile)
     except InputError as error:
-        return error.reason
-    return program.problems[0][1] if program.problems else None
-
-
-def _axis_word(line: str, profile: Controller) -> str | None:
-    """The joint an axis word of ``line`` (comments left out) would move, None if none."""
-    code = re.sub(r"\([^()]*\)|;.*", "", line).upper()
-    for letter in re.findall(r"(?<![A-Z])([A-Z])\s*[-+]?(?:\d|\.\d)", code):
-        if letter in profile.axes:
-            return JOINT_ORDER[profile.axes.index(letter)]
-    return None
+        return f"verify could not read '{line}' back: {error.reason}"
+    given = np.flatnonzero(np.any(~np.isnan(program.joints), axis=0))
+    if given.size:
+        return (f"'{line}' moves the {JOINT_ORDER[int(given[0])]} axis: the moves between cuts are the post's to "
+                f"plan and verify (positions.tool_change, positions.home)")
+    return f"verify could not read '{line}' back: {program.problems[0][1]}" if program.problems else None
 
 
 class JointPosition(BaseModel):

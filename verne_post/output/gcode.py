@@ -487,7 +487,7 @@ class GcodeWriter:
             head.append((render(controller.program_number_line, self.values), False))
         if program.part_name is not None:
             head.append((_comment(f"PART {program.part_name}", controller), False))
-        head.extend((_comment(h, controller), False) for h in program.header if comment_text(h))
+        head.extend((comment, False) for comment in (_comment(h, controller) for h in program.header) if comment)
         head.extend((_line(t, self.values, controller, "program start"), True) for t in controller.program_start)
         return self._render(head)
 

@@ -232,6 +232,7 @@ class Verifier:
         self.machine, self.source, self.tol, self.axis_tol, self.work_offset = (machine, source, tol, axis_tol,
                                                                                  work_offset)
         self.rapid_tol, self.top = rapid_tol, top  # mm; the whole program's highest feed point (table z)
+        self.controller = machine.controller.profile()  # how each part's text is read
         self.state: ReadState | None = None
         self.last: GcodeProgram | None = None  # the last block so far (one row)
         self.pending: Reference | None = None  # poses not yet verified: the last one reached, and any after
@@ -240,7 +241,7 @@ class Verifier:
     def read(self, text: str, reference: Reference | None = None, final: bool = False) -> None:
         """Verify the next part of the program (whole lines) against ``reference``, the next CL
         poses; ``final`` for the last part."""
-        program = read_gcode(text, self.source, self.state, final, self.machine.controller.profile())
+        program = read_gcode(text, self.source, self.state, final, self.controller)
         self.state = program.state
         if reference is not None and self.pending is not None:
             reference = self.pending.then(reference)
