@@ -641,9 +641,13 @@ def test_nurbs_with_a_wrong_knot_count_names_its_line(tmp_path: Path) -> None:
     assert e.line == 6 and "NURBS" in e.reason
 
 
-@pytest.mark.parametrize("name", ["nx_zlevel_coremill_mm.cls", "creo8_schruppen_roughing_mm.ncl",
-                                  "makino_ffcam_plane1_mm.cldata", "creo_v19_thread_mill_helical_inch.ncl"])
-def test_real_samples_post_and_certify(tmp_path: Path, name: str) -> None:
+@pytest.mark.parametrize(("name", "offset"), [
+    ("nx_zlevel_coremill_mm.cls", "0"), ("creo8_schruppen_roughing_mm.ncl", "0"),
+    ("makino_ffcam_plane1_mm.cldata", "0"),
+    # its deepest GOTO is 4.0313 in (102.4 mm) below part zero; the table's face is 60 mm below the
+    # table frame (machines/verne.yaml): part zero 60 mm higher leaves 17.6 mm under the tip
+    ("creo_v19_thread_mill_helical_inch.ncl", "60")])
+def test_real_samples_post_and_certify(tmp_path: Path, name: str, offset: str) -> None:
     """Posted without timing (durations from the programmed feeds), each program verifies from its text."""
     from click.testing import CliRunner
 
@@ -651,7 +655,7 @@ def test_real_samples_post_and_certify(tmp_path: Path, name: str) -> None:
 
     out = tmp_path / "out.nc"
     result = CliRunner().invoke(main, [str(SAMPLES / name), "-o", str(out), "--no-timing", "-q",
-                                       "--tool-length", "100"])
+                                       "--tool-length", "100", "--work-offset", "0", "0", offset])
     assert result.exit_code == 0, result.output
     header = out.read_text()[:2000]
     assert "(VERIFIED: MAX TIP DEVIATION" in header and "ALL LIMITS HELD" in header

@@ -116,9 +116,10 @@ def test_first_failure_gives_the_verdict_of_the_full_checks() -> None:
     machine = vp.load_machine()
     zero = machine_poses(read_toolpath(EXAMPLES / "nx_variable_axis_inch.cls"), machine, work_offset=(0, 0, 0))
     options = PostOptions(plan=False)
-    centre = np.array([-4.9, -3.5, -150.7])  # the program runs here (asserted below)
-    offsets = [centre] + [centre + t * np.array(d) for d, span in (((-1, 0, 0), range(362, 387, 3)),
-                                                                   ((0, 1, 0), range(372, 391, 3))) for t in span]
+    centre = np.array([0.9, 0.1, -74.1])  # near where 'place' puts it: the program runs here (asserted below)
+    # out along -x and +y the bodies meet from about 350 mm, the joint limits fail from about 405 mm
+    offsets = [centre] + [centre + t * np.array(d) for d, span in (((-1, 0, 0), range(398, 423, 3)),
+                                                                   ((0, 1, 0), range(396, 421, 3))) for t in span]
     seen = set()
 
     def inserted(checked: Checked) -> int:

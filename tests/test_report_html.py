@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from verne_post.cli import main
-from verne_post.report.html import envelope
+from verne_post.report.series import envelope
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
 # 5 joints x (position, velocity, acceleration), the feed, 5 margins, the time budget, 3 maps.

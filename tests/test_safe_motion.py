@@ -357,3 +357,83 @@ def test_without_positions_the_tool_is_changed_high_enough_for_the_longer_tool(t
     assert _blocks(text)[0][1].startswith("G0")  # positioned over the first point, not at a home
     judged = judge_moves_between_cuts(bare, text, path.tip + OFFSET, path.axis, path.rapid)
     assert judged["judged"] > 0
+
+
+#: Side work: the tool axis horizontal (the table tilted about 87 degrees, within theta1's 90),
+#: along +x on the first wall, +y on the second; a retract along it can never rise to a plane.
+SIDE_CL = """PARTNO/SIDE
+UNITS/MM
+LOADTL/1,LENGTH,80.0
+FEDRAT/MMPM,500.0
+RAPID
+GOTO/60.0,-30.0,-10.0,1.0,0.0,0.0
+GOTO/40.0,-30.0,-10.0,1.0,0.0,0.0
+GOTO/40.0,30.0,-10.0,1.0,0.0,0.0
+GOTO/40.0,30.0,-20.0,1.0,0.0,0.0
+GOTO/40.0,-30.0,-20.0,1.0,0.0,0.0
+RAPID
+GOTO/-30.0,45.0,-10.0,0.0,1.0,0.0
+GOTO/-30.0,40.0,-10.0,0.0,1.0,0.0
+GOTO/30.0,40.0,-10.0,0.0,1.0,0.0
+"""
+
+
+def _envelope(tip: np.ndarray, rapid: np.ndarray, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The clearance envelope as the docs define it, from the CL tips (table frame, mm): the feed
+    points' box grown by the clearance on every side, open below."""
+    feed = tip[~rapid]
+    lo, hi = feed.min(axis=0) - clearance, feed.max(axis=0) + clearance
+    lo[2] = -np.inf
+    return lo, hi
+
+
+def _rapid_samples(machine: vp.Machine, text: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """FK tips and axes (table frame) of every move between cuts but the first G0, sampled along
+    each block's joint-space line, and the block ends' tips."""
+    program = read_gcode(text)
+    f = np.arange(SAMPLES_PER_BLOCK + 1) / SAMPLES_PER_BLOCK
+    blocks = np.flatnonzero(program.rapid)[1:]
+    q0, q1 = program.joints[blocks - 1], program.joints[blocks]
+    joints = (q0[:, None] + f[None, :, None] * (q1 - q0)[:, None]).reshape(-1, 5)
+    fk = vp.forward_kinematics(machine, joints, tool_length=np.repeat(program.tool_length[blocks], len(f)))
+    assert fk.reachable.all()
+    ends = vp.forward_kinematics(machine, q1, tool_length=program.tool_length[blocks])
+    return fk.tip, fk.axis, ends.tip
+
+
+def test_side_work_with_a_horizontal_tool_axis_leaves_the_envelope_through_its_sides(tmp_path, machine):
+    text, path, tip = _post_cl(tmp_path, machine, "side", SIDE_CL)  # no violations, verified
+    axis, rapid = path.axis, path.rapid
+    lo, hi = _envelope(tip, rapid, machine.safe.clearance)
+    samples, sample_axis, ends = _rapid_samples(machine, text)
+    slack = 0.5  # mm: the rapid tolerance the legs outside the envelope are kept to
+    outside = np.any((samples[:, :2] >= hi[:2] - slack) | (samples[:, :2] <= lo[:2] + slack), axis=1) | \
+        (samples[:, 2] >= hi[2] - slack)
+    # inside the envelope only on a retract or approach ray of a CL point (within the feed tolerance)
+    on_ray = np.zeros(len(samples), bool)
+    for k in range(len(tip)):
+        on_ray |= _ray_distance(samples, np.tile(tip[k], (len(samples), 1)), np.tile(axis[k], (len(samples), 1))) \
+            < 0.01
+    assert np.all(outside | on_ray)
+    # the side exits (derived here: each CL point's ray to the grown box's x or y face) and the
+    # vertical rise or descent above each to the top are block ends
+    side = {4: (tip[4] + (hi[0] - tip[4, 0]) * axis[4]), 5: (tip[5] + (hi[1] - tip[5, 1]) * axis[5])}
+    for k, exit_point in side.items():
+        top = np.r_[exit_point[:2], hi[2]]
+        for point in (exit_point, top):
+            assert np.min(np.linalg.norm(ends - point, axis=1)) < 1e-3, (k, point)
+        # between the two the tip keeps to the vertical line and the axis is held
+        vertical = (np.linalg.norm(samples[:, :2] - exit_point[:2], axis=1) < slack) & \
+            (samples[:, 2] > exit_point[2] + 1.0) & (samples[:, 2] < hi[2] - 1.0)
+        assert vertical.sum() >= SAMPLES_PER_BLOCK // 2
+        assert np.all(sample_axis[vertical] @ axis[k] > np.cos(np.radians(0.5)))
+
+
+def test_a_vertical_tool_still_moves_between_cuts_on_its_axis_and_at_the_level(tmp_path, machine):
+    # the plane of the safe level, from the poses: no rise or descent beside the part for a
+    # vertical tool, every block end of a move between cuts on a CL point's vertical or at the level
+    text, path, tip = _post_cl(tmp_path, machine, "tools", TOOLS_CL)
+    level = tip[~path.rapid, 2].max() + machine.safe.clearance
+    _, _, ends = _rapid_samples(machine, text)
+    on_vertical = np.min(np.linalg.norm(ends[:, None, :2] - tip[None, :, :2], axis=2), axis=1) < 1e-3
+    assert np.all(on_vertical | (ends[:, 2] >= level - 1e-3))

@@ -17,6 +17,7 @@ import numpy as np
 import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
+from .bodies.config import BodiesConfig, CylinderSize, SetupConfig
 from .errors import InputError
 from .kinematics import reference_pose_problem
 from .kinematics.geometry import Geometry
@@ -186,6 +187,12 @@ class Tool(BaseModel):
     model_config = _STRICT
     length: Annotated[float, Field(ge=0, le=MAX_TOOL_LENGTH)]
     """mm: spindle nose to tool tip (gauge length)."""
+    diameter: Annotated[float, Field(gt=0, le=MAX_TOOL_LENGTH)] | None = None
+    """mm: the cutter's diameter, where the CL file's TLDATA gives none (else bodies.cutter_diameter)."""
+    flute_length: Annotated[float, Field(gt=0, le=MAX_TOOL_LENGTH)] | None = None
+    """mm: the cutting length from the tip; above it the shank (checked against the stock in cuts too)."""
+    holder: tuple[CylinderSize, ...] | None = Field(default=None, max_length=16)
+    """The tool's holder: cylinders from the spindle nose toward the tip (else bodies.holder)."""
 
 
 class GcodeConfig(BaseModel):
@@ -420,7 +427,7 @@ class SafeConfig(BaseModel):
     max_turn_in_rapid: Annotated[float, Field(ge=0, le=180)] = 30.0
     """deg: a rapid that turns the tool axis by more retracts, reorients at the safe level, approaches."""
     clearance: Annotated[float, Field(ge=0, le=MAX_MM)] = 10.0
-    """mm: the safe level is this far above the program's highest feed point (table-frame z)."""
+    """mm: the feed points' box grown by this on all sides but the bottom (table frame): the clearance envelope."""
     rapid_feed: Annotated[float, Field(ge=1.0, le=1e8)] | None = None
     """mm/min: a cap on the tool-tip speed relative to the part in rapids (absent: the joint limits only)."""
 
@@ -470,6 +477,10 @@ class Machine(BaseModel):
     """Moves between cuts: rapids, retracts, tool changes."""
     positions: Positions = Positions()
     """Joint-space positions of the start, end and tool changes."""
+    bodies: BodiesConfig = BodiesConfig()
+    """The machine's bodies for the collision checks (mm), and their near-miss margin."""
+    setup: SetupConfig = SetupConfig()
+    """Stock and fixtures on the table, unless --stock, --fixture or --setup give them."""
     calibration: CalibrationRecord | None = None
     """Provenance of a calibrated file (written by verne-post calibrate)."""
     _source: str = PrivateAttr(default="verne.yaml")
@@ -669,6 +680,30 @@ def machine_text(path: str | Path | None = None) -> str:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
         raise InputError("machine file is not UTF-8 text", source) from None
+
+
+def load_setup(path: str | Path) -> SetupConfig:
+    """A setup file (``--setup``): the keys of a machine file's ``setup:`` section (units, stock,
+    fixtures) at its top level, read and validated as a machine file is (the first problem at its line)."""
+    source = str(path)
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read the setup file: {exc.strerror or exc}", source) from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise InputError(f"setup file larger than {MAX_FILE_BYTES} bytes", source)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise InputError("setup file is not UTF-8 text", source) from None
+    data, lines = _parse_yaml(text, source)
+    if not isinstance(data, dict):
+        raise InputError("a setup file must be a YAML mapping of units, stock and fixtures", source)
+    try:
+        return SetupConfig.model_validate(data)
+    except ValidationError as exc:
+        raise _problems(exc, lines)[0].error(source) from None
 
 
 def machine_from_text(text: str, source: str) -> Machine:

@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
+from .bodies.config import SetupConfig, setup_in_force
+from .bodies.setup import Setup, SetupError
+from .errors import InputError
 from .planning.topp import Engine
 
 if TYPE_CHECKING:
@@ -36,6 +40,10 @@ class PostOptions:
     planner: Engine = "copp"  # TOPP2 engine of the feed moves (planning.topp): copp-py, or toppra the reference
     optimize: bool = False  # also the third-order programme on long feed sequences (verne_post.planning.third_order)
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)  # processes for the feed planning
+    stock: tuple[str, ...] = ()  # --stock specs (part frame, CL units; verne_post.bodies.setup)
+    fixtures: tuple[str, ...] = ()  # --fixture specs
+    setup: SetupConfig | None = None  # --setup FILE, read
+    setup_source: str | None = None  # its path (STL paths are relative to its folder)
 
 
 def work_offset_in_force(machine: Machine, options: PostOptions) -> tuple[float, float, float]:
@@ -43,3 +51,15 @@ def work_offset_in_force(machine: Machine, options: PostOptions) -> tuple[float,
     offset = machine.work_offset if options.work_offset is None else options.work_offset
     assert offset != "auto", "postprocess resolves the automatic work offset first"
     return offset
+
+
+def setup_of(machine: Machine, options: PostOptions, cl_units: str) -> Setup:
+    """The stock and fixtures of a post (mm, part frame): ``--stock``/``--fixture``, else
+    ``--setup``'s, else the machine file's (:func:`verne_post.bodies.config.setup_in_force`)."""
+    base = None if options.setup_source is None else Path(options.setup_source).parent
+    try:
+        return setup_in_force(cl_units, machine.setup, options.setup, base, options.stock, options.fixtures)
+    except SetupError as exc:
+        where = ("--stock/--fixture" if options.stock or options.fixtures else options.setup_source
+                 or f"{machine.source} setup")
+        raise InputError(f"{exc}", where) from None

@@ -36,6 +36,7 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from .api import joint_bounds
+from .checks.collision import check_collisions, program_bodies, world_of
 from .checks.limits import Violation, check_program, theta2_rate_warnings
 from .checks.stage import (
     Checked,
@@ -55,7 +56,7 @@ from .motion.branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, c
 from .motion.linearise import Blocks
 from .motion.poses import MachinePoses, machine_poses
 from .motion.safe_motion import between_cuts
-from .options import PostOptions, work_offset_in_force
+from .options import PostOptions, setup_of, work_offset_in_force
 from .output.atomic import atomic_write
 from .output.gcode import (
     GcodeFormat,
@@ -80,7 +81,7 @@ from .planning.stage import (
 from .planning.timing import Limits
 from .processes.helpers import Helper, VerifierProcess, available, outcome
 from .report.figures import Figures, report
-from .verify.verifier import Reference, Verification, Verifier, feed_top, verify_program
+from .verify.verifier import Reference, Verification, Verifier, feed_box, verify_program
 from .version import __version__
 
 
@@ -207,6 +208,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
     last: PathIK | None = None  # the part before's last pose, to linearise a feed move into this part
     before: tuple[Blocks, bool] | None = None  # the part before's last moving block, and whether a rapid
     safe = safe_settings(machine, poses, options)
+    world = world_of(machine, poses)
     first = 0
     while first < n:
         end = min(n, first + size)
@@ -246,6 +248,10 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, poses.line[blocks.pose],
                                         poses.source)
         lap("checks")
+        collisions = check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip, world)
+        checks += collisions.violations
+        warnings += collisions.warnings
+        lap("collisions")
         moving = np.flatnonzero(np.r_[True, np.any(np.diff(blocks.joints, axis=0) != 0, axis=1)])
         blocks, rapid = blocks.rows(moving), rapid[moving]
         duration = block_durations(machine, poses, blocks, rapid)
@@ -264,6 +270,12 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         first = cut
 
 
+def _order(v: Violation) -> tuple[int, bool, str]:
+    """By line; on one line a collision after the joints' own faults (where a joint cannot go,
+    where its bodies would be is moot)."""
+    return v.line, v.kind == "collision", v.kind
+
+
 def _violations(checks: list[Violation], others: list[Violation], timing: list[Violation],
                 placement: Placement | None) -> list[Violation]:
     """The violations of the parts as the whole program's checks give them: one per line and kind
@@ -271,8 +283,11 @@ def _violations(checks: list[Violation], others: list[Violation], timing: list[V
     unique: dict[tuple[int, str], Violation] = {}
     for v in checks:
         unique.setdefault((v.line, v.kind), v)
-    violations = sorted([*unique.values(), *others], key=lambda v: (v.line, v.kind))
-    if placement is not None and not placement.feasible:
+    violations = sorted([*unique.values(), *others], key=_order)
+    if placement is not None and placement.collisions:  # no offset avoids them: they are the reason
+        violations = sorted({(v.line, v.message): v for v in [*placement.collisions, *violations]}.values(),
+                            key=_order)
+    elif placement is not None and not placement.feasible:
         violations.insert(0, Violation(placement.line, "placement", f"no work offset lets the whole program run: "
                                                                     f"{placement.reason}"))
     return violations + timing
@@ -322,13 +337,15 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
                              arc_direction=options.arc_direction, frame=options.frame, feed=options.feed)
     clock.lap("parse")
     placement = None
+    setup = setup_of(machine, options, toolpath.units)
     if options.work_offset == "auto":
-        zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length)
+        zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length,
+                             setup=setup)
         placement = place(machine, zero, options, progress=clock.progress)
         options = replace(options, work_offset=placement.offset)
         clock.lap("placement")
     poses = machine_poses(toolpath, machine, work_offset=work_offset_in_force(machine, options),
-                          tool_length=options.tool_length)
+                          tool_length=options.tool_length, setup=setup)
     return poses, options, placement
 
 
@@ -412,9 +429,10 @@ def post(path: str | Path, machine: Machine, options: PostOptions, output: str |
         poses, options, placement = _machine_poses(path, machine, options, clock)
         verifier: Verifier | VerifierProcess | None = None
         if verify:
+            offset = work_offset_in_force(machine, options)
             settings = {"source": str(output), "tol": options.tol, "axis_tol": options.axis_tol,
-                        "work_offset": work_offset_in_force(machine, options), "rapid_tol": options.rapid_tol,
-                        "top": feed_top(Reference.of(poses))}
+                        "work_offset": offset, "rapid_tol": options.rapid_tol,
+                        "box": feed_box(Reference.of(poses)), "bodies": program_bodies(poses, offset)}
             verifier = Verifier(machine, **settings) if verifying is None else verifying.start(**settings)
         return _post(machine, poses, options, placement, output, clock, planner, verifier, timing_figures, part_poses,
                      before_writing)
@@ -607,7 +625,8 @@ def write_gcode(result: PostResult, machine: Machine, options: PostOptions, path
         offset = result.placement.offset if result.placement is not None else work_offset_in_force(machine, options)
         verification = verify_program(head + body + tail, machine, source=str(path),
                                       against=Reference.of(result.poses), work_offset=offset, tol=options.tol,
-                                      axis_tol=options.axis_tol, rapid_tol=options.rapid_tol)
+                                      axis_tol=options.axis_tol, rapid_tol=options.rapid_tol,
+                                      bodies=program_bodies(result.poses, offset))
         if not verification.ok:
             return verification
         head = GcodeWriter(fmt).head(_certified(result.program, verification))

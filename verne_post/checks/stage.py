@@ -18,6 +18,7 @@ from ..motion.linearise import Blocks, linearise
 from ..motion.poses import MachinePoses
 from ..motion.safe_motion import SafeSettings, between_cuts
 from ..options import PostOptions
+from .collision import check_collisions, tool_stacks
 from .limits import Violation, check_program
 
 
@@ -32,11 +33,13 @@ class Checked:
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
-                lap: Callable[[str], None] = lambda stage: None, first_failure: bool = False) -> Checked:
+                lap: Callable[[str], None] = lambda stage: None, first_failure: bool = False,
+                collisions: bool = True) -> Checked:
     """IK and branch, linearisation and every check of table-frame poses (no timing); violations
     sorted by line. Placement calls this for each candidate work offset. With ``first_failure``
     the linearisation stops once a block end fails: the violations then show that the program
-    fails, not every way it does (placement's room only asks whether it runs)."""
+    fails, not every way it does (placement's room only asks whether it runs). ``collisions``:
+    with the bodies' check (placement's room is the room to the machine's limits)."""
     solved = solve_poses(machine, poses, options)
     lap("ik")
     blocks = linearise_poses(machine, poses, options, solved, until_failure=first_failure)
@@ -47,13 +50,22 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
     checks, others = program_violations(machine, poses, options, solved.pair_switch, blocks, rapid)
     others += between_violations(poses, between.problems)
+    if collisions and not (first_failure and (checks or others)):
+        others += check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip,
+                                   first_collision=first_failure).violations
     return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
 
 
 def safe_settings(machine: Machine, poses: MachinePoses, options: PostOptions) -> SafeSettings:
+    """The moves between cuts' settings: the envelope around the feed points and the setup (the
+    stock and fixtures, grown by the widest cutter's radius too, so that the cutter's side clears
+    them by ``safe.clearance``; without a setup the feed points are tip positions the cutter
+    already clears)."""
+    box = poses.setup.bounds()
+    radius = 0.0 if box is None else max(float(s.radius[0]) for s in tool_stacks(machine, poses))
     return SafeSettings.of(machine, poses.tip, poses.rapid, rapid_tol=options.rapid_tol,
                            rapid_axis_tol=np.radians(options.rapid_axis_tol), tol=options.tol,
-                           axis_tol=np.radians(options.axis_tol))
+                           axis_tol=np.radians(options.axis_tol), setup_box=box, tool_radius=radius)
 
 
 def rapid_blocks(poses: MachinePoses, blocks: Blocks) -> np.ndarray:

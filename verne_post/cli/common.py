@@ -149,6 +149,19 @@ def decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) -
     return function
 
 
+# The stock and fixtures ('post', 'check', 'batch', 'place').
+setup_options = [
+    click.option("--stock", multiple=True, metavar="SPEC",
+                 help="The stock, in the part frame and the CL file's units: box:x0,y0,z0,x1,y1,z1, "
+                      "cylinder:cx,cy,z0,z1,r or stl:PATH, optionally NAME=SPEC; repeatable (docs/collision.md)."),
+    click.option("--fixture", "fixtures", multiple=True, metavar="SPEC",
+                 help="A clamp, vice or pallet, as --stock; repeatable."),
+    click.option("--setup", "setup_path", type=click.Path(dir_okay=False), default=None,
+                 help="A setup YAML (units, stock, fixtures as the machine file's setup: section); --stock and "
+                      "--fixture replace its stock or fixtures."),
+]
+
+
 # The choices of the pipeline ('post', 'check' and 'batch'), around the --report option.
 choices_before_report = [
     machine_option,
@@ -167,6 +180,7 @@ choices_before_report = [
     click.option("--rapid-axis-tol", type=AXIS_TOL, default=0.5, show_default=True,
                  help="Tool axis deviation allowed in a CL rapid, degrees."),
     *_reader_options,
+    *setup_options,
 ]
 choices_after_report = [
     click.option("--no-timing", is_flag=True,

@@ -2,13 +2,24 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from typing import Any
 
 import click
 
-from ..machine import load_machine
-from .common import AXIS_TOL, TIP_TOL, TOOL_LENGTH, machine_option, read_cl, reader_option_group, user_errors
+from ..machine import load_machine, load_setup
+from .common import (
+    AXIS_TOL,
+    TIP_TOL,
+    TOOL_LENGTH,
+    decorated,
+    machine_option,
+    read_cl,
+    reader_option_group,
+    setup_options,
+    user_errors,
+)
 from .main import main
 from .post import PLACEMENT_STEPS, progress_bar
 
@@ -21,11 +32,13 @@ from .post import PLACEMENT_STEPS, progress_bar
 @click.option("--tol", type=TIP_TOL, default=0.005, show_default=True, help="As for 'post': tip deviation, mm.")
 @click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True, help="As for 'post': axis deviation, deg.")
 @reader_option_group
+@functools.partial(decorated, options=setup_options)
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the placement as JSON.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @user_errors
 def place_command(cl_file: str, machine_path: str | None, tool_length: float | None, tol: float, axis_tol: float,
-                  report_path: str | None, quiet: bool, **reading: Any) -> None:
+                  report_path: str | None, quiet: bool, stock: tuple[str, ...], fixtures: tuple[str, ...],
+                  setup_path: str | None, **reading: Any) -> None:
     """Where to clamp the part: the work offset at which PART.cls runs with the most room to every
     limit and singularity, and how far the part may move from it and still run.
 
@@ -33,14 +46,17 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     Exit code 3 when no offset works, with the reason.
     """
     from ..motion.poses import machine_poses
-    from ..options import PostOptions
+    from ..options import PostOptions, setup_of
     from ..output.tables import write_json
     from ..placement.search import place
 
     machine = load_machine(machine_path)
-    options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, **reading)
+    options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, stock=stock,
+                          fixtures=fixtures, setup=None if setup_path is None else load_setup(setup_path),
+                          setup_source=setup_path, **reading)
     toolpath = read_cl(cl_file, **reading)
-    poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length)
+    poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length,
+                          setup=setup_of(machine, options, toolpath.units))
     with progress_bar(PLACEMENT_STEPS, quiet) as tick:
         placement = place(machine, poses, options, progress=lambda stage: tick())
     if report_path:

@@ -13,7 +13,7 @@ from typing import Any
 import click
 
 from ..errors import InputError, one_line
-from ..machine import Machine, load_machine
+from ..machine import Machine, load_machine, load_setup
 from .common import check_outputs, decorated, output_options, post_options, user_errors
 from .main import main
 from .verify import print_findings
@@ -26,7 +26,9 @@ def options_from(no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
     offset = "auto" if auto_offset else choices["work_offset"] or None
-    return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing)
+    setup_path = choices.pop("setup_path", None)
+    setup = None if setup_path is None else load_setup(setup_path)
+    return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing, setup=setup, setup_source=setup_path)
 
 
 def run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool,
@@ -105,8 +107,9 @@ def finish(machine: Machine, options: Any, result: Any, report_path: str | None,
     # the report after the violations: they are printed even when the report cannot be written
     if wants_html(report_path):
         from ..report.html import write_html_report
+        from ..report.post_scene import post_scene
 
-        write_html_report(report_path, machine, options, result)
+        write_html_report(report_path, machine, options, result, scene=post_scene(machine, result))
     elif report_path:
         write_json(report_path, result.report(machine, options))
     if result.violations:

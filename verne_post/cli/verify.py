@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -15,9 +16,11 @@ from .common import (
     MAX_MESSAGES,
     TIP_TOL,
     WORK_OFFSET,
+    decorated,
     machine_option,
     read_cl,
     reader_option_group,
+    setup_options,
     user_errors,
 )
 from .main import main
@@ -53,13 +56,21 @@ def print_findings(verification: Verification, max_messages: int) -> None:
 @click.option("--max-messages", type=MAX_MESSAGES, default=20, show_default=True,
               help="Findings printed before the count.")
 @reader_option_group
+@functools.partial(decorated, options=setup_options)
 @user_errors
 def verify_command(program: str, cl_file: str | None, machine_path: str | None,
                    work_offset: tuple[float, float, float] | None, tol: float | None, axis_tol: float | None,
                    rapid_tol: float | None, report_path: str | None, quiet: bool, max_messages: int,
+                   stock: tuple[str, ...], fixtures: tuple[str, ...], setup_path: str | None,
                    **reading: Any) -> None:
-    """Verify a joint-space G-code program: limits and margins along the motion, and with
-    --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
+    """Verify a joint-space G-code program: limits and margins along the motion, bodies that meet
+    (the machine's, the tools' and the setup's: --stock, --fixture, --setup as for post), and
+    with --against how closely it follows the CL path. Exit 0 if it passes, 3 if not."""
+    from ..bodies.world import ProgramBodies
+    from ..checks.collision import tool_shapes
+    from ..cl.toolpath import ToolChange
+    from ..machine import load_setup
+    from ..options import PostOptions, setup_of
     from ..output.tables import write_json
     from ..verify.verifier import verify_program
 
@@ -69,8 +80,14 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     except OSError as error:
         raise InputError(f"cannot read the program: {error.strerror}", program) from None
     against = None if cl_file is None else read_cl(cl_file, **reading)
+    # the setup in the part frame, in the CL file's units (mm without one)
+    choices = PostOptions(stock=stock, fixtures=fixtures, setup_source=setup_path,
+                          setup=None if setup_path is None else load_setup(setup_path))
+    setup = setup_of(machine, choices, "mm" if against is None else against.units)
+    diameters = {} if against is None else {e.tool: e.diameter for e in against.events if isinstance(e, ToolChange)}
+    bodies = ProgramBodies(setup, tool_shapes(machine, diameters))
     verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
-                                  tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol)
+                                  tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol, bodies=bodies)
     if report_path:
         write_json(report_path, verification.report())
     if not verification.ok:

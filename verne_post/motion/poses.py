@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..bodies.setup import NO_SETUP, Setup
 from ..cl.toolpath import MIN_FEED, Event, ToolChange, Toolpath
 from ..errors import InputError
 from ..machine import Machine
@@ -27,6 +28,9 @@ class ToolUse:
     delta: float
     line: int
     source: str  # "CL file", "machine tool table" or "--tool-length"
+    diameter: float | None = None  # mm: the cutter's (CL file, else tool table; None: the machine's default)
+    flute_length: float | None = None  # mm (tool table; None: the machine's default)
+    holder: tuple[tuple[float, float], ...] | None = None  # (diameter, length) mm from the nose (tool table)
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,11 @@ class MachinePoses:
     warnings: tuple[str, ...]
     dialect: str = "CSV poses"  # the CL dialect and conventions the reader applied
     notes: tuple[str, ...] = ()  # the reader's choices for the program header (Toolpath.notes)
+    setup: Setup = NO_SETUP  # stock and fixtures, mm, table frame (placed at the work offset)
+
+    def shifted(self, offset: np.ndarray) -> MachinePoses:
+        """The poses with the part (tips and setup) moved by ``offset`` (mm, table frame)."""
+        return replace(self, tip=self.tip + offset, setup=self.setup.shifted(offset))
 
     def __len__(self) -> int:
         return len(self.tip)
@@ -76,9 +85,19 @@ def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, s
 
 
 
+def _tool_use(machine: Machine, number: int, length: float, line: int, source: str,
+              diameter: float | None = None) -> ToolUse:
+    entry = machine.tools.get(number)
+    holder = None if entry is None or entry.holder is None else tuple((h.diameter, h.length) for h in entry.holder)
+    return ToolUse(number, length, machine.geometry.spindle_nose + length, line, source,
+                   diameter if diameter else None if entry is None else entry.diameter,
+                   None if entry is None else entry.flute_length, holder)
+
+
 def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[float, float, float] | None = None,
-                  tool_length: float | None = None) -> MachinePoses:
-    """Table-frame poses with tool lengths and continuity sequences (see module docstring)."""
+                  tool_length: float | None = None, setup: Setup = NO_SETUP) -> MachinePoses:
+    """Table-frame poses with tool lengths and continuity sequences (see module docstring);
+    ``setup`` in the part frame (mm), placed at the work offset with the tips."""
     n = len(toolpath)
     offset = np.asarray(machine.work_offset if work_offset is None else work_offset, dtype=float)
     changes = [e for e in toolpath.events if isinstance(e, ToolChange)]
@@ -90,13 +109,12 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
             raise InputError("motion before any tool is loaded and no --tool-length given", toolpath.source,
                              int(toolpath.line[0]))
         lengths[:first] = tool_length
-        tools.append(ToolUse(0, tool_length, machine.geometry.spindle_nose + tool_length, int(toolpath.line[0]),
-                             "--tool-length"))
+        tools.append(_tool_use(machine, 0, tool_length, int(toolpath.line[0]), "--tool-length"))
     for k, change in enumerate(changes):
         length, origin = _tool_length(machine, change, tool_length, toolpath.source)
         end = changes[k + 1].index if k + 1 < len(changes) else n
         lengths[change.index:end] = length
-        tools.append(ToolUse(change.tool, length, machine.geometry.spindle_nose + length, change.line, origin))
+        tools.append(_tool_use(machine, change.tool, length, change.line, origin, change.diameter))
     missing_feed = ~toolpath.rapid & ~np.isfinite(toolpath.feed)
     missing_feed[0] = False  # the first motion is a positioning move (G0) anyway
     if missing_feed.any():
@@ -118,4 +136,5 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
         line=toolpath.line, rapid=toolpath.rapid, feed=toolpath.feed, inverse_time=toolpath.inverse_time,
         tool=toolpath.tool, tool_length=lengths, sequence=np.cumsum(boundary) - 1, events=toolpath.events,
         tools=tuple(tools), warnings=toolpath.warnings, dialect=toolpath.dialect, notes=toolpath.notes,
+        setup=setup.shifted(offset),
     )

@@ -13,17 +13,25 @@ through the part. So no move between cuts is left to the joint interpolation:
   the line's upward normal in its vertical plane, reached within a short ramp at each end),
   and a block whose joint interpolation dips below the line is split further.
 - **Retract, reorient, approach** where the axis turns more, the angle pair changes, or the
-  straight line leaves the machine's limits: retract along the current tool axis to the safe
-  level (``safe.clearance`` above the program's highest feed point, table-frame z), turn the
+  straight line leaves the machine's limits, by way of the clearance envelope
+  (:attr:`SafeSettings.envelope`): the bounding box of the program's feed points (and a setup
+  box, if given) grown by ``safe.clearance`` on every side, open below (the table is under the
+  part); its top is the safe level, ``safe.clearance`` above the highest feed point. Up to six
+  legs: retract along the current tool axis until the tip leaves the envelope (the box is
+  convex: from there on up its axis the whole tool is out too); if it left through a side (a
+  nearly horizontal axis, in side work), rise vertically, the axis held, to the top; turn the
   tool axis there with the tip held still (the rotary joints move about linearly, the sliders
   keep the tip in place: the table turns about the tip; crossing the pole where the angle pair
-  changes), travel at that level, descend along the new tool axis. Retract and approach keep
-  the feed tolerances (``tol``, ``axis_tol``): the tool leaves or enters the cut's surroundings.
+  changes); travel at the top; descend vertically above the new pose's exit point, if it has a
+  side exit; approach along the new tool axis. Retract and approach keep the feed tolerances
+  (``tol``, ``axis_tol``): the tool leaves or enters the cut's surroundings; the rise, turn,
+  travel and descent, outside the envelope, the rapid ones. A tool axis that would have to lower
+  the tool to leave the envelope (pointing down) is a problem.
 - **Start, tool changes, end** go through the same logic from and to the machine file's
   joint-space ``positions.home`` and ``positions.tool_change``, reached exactly. Without a
-  ``tool_change`` position the tool is changed where the retract leaves it, high enough that
-  the new tool's tip is at the safe level too; without ``home`` the program starts over its
-  first pose at the safe level.
+  ``tool_change`` position the tool is changed where the retract (and rise) leaves it, high
+  enough that the new tool's tip is at the safe level too; without ``home`` the program starts
+  over its first pose's exit from the envelope at the safe level.
 
 Blocks of a rapid into CL pose k have ``pose`` k and fractions in (0, 1); the retract and move
 to the tool-change position (with the old tool) or home after the program's last pose belong
@@ -71,22 +79,42 @@ class SafeSettings:
     tol: float  # mm: retract and approach (the feed tolerance)
     axis_tol: float  # rad
     max_turn: float  # rad: a larger axis turn in a rapid retracts, reorients, approaches
-    level: float  # mm, table-frame z: the safe level
+    #: (2, 3) mm, table frame: the clearance envelope's lo and hi corners, an axis-aligned box
+    #: the moves between cuts leave before they travel; lo z is -inf (see :meth:`of`)
+    envelope: np.ndarray
     cone: float  # rad: the pole cone of the branch stage
     home: np.ndarray | None  # (5,) mm, rad
     tool_change: np.ndarray | None  # (5,) mm, rad
 
+    @property
+    def level(self) -> float:
+        """mm, table-frame z: the safe level, the envelope's top, where the moves between cuts travel."""
+        return float(self.envelope[1, 2])
+
     @classmethod
     def of(cls, machine: Machine, tip: np.ndarray, rapid: np.ndarray, *, rapid_tol: float, rapid_axis_tol: float,
-           tol: float, axis_tol: float) -> SafeSettings:
-        """Settings of a program with CL tips (N, 3) mm, table frame, and rapid flags (N,):
-        the safe level is ``safe.clearance`` above its highest feed point (or any point, when it has
-        no feed move); tolerances in mm and rad."""
+           tol: float, axis_tol: float, setup_box: np.ndarray | None = None, tool_radius: float = 0.0
+           ) -> SafeSettings:
+        """Settings of a program with CL tips (N, 3) mm, table frame, and rapid flags (N,);
+        tolerances in mm and rad.
+
+        The clearance envelope is the bounding box of the feed points (of every point, when the
+        program has no feed move) united with ``setup_box`` ((2, 3) mm, table frame: the stock and
+        fixtures, if known), grown on every side by ``safe.clearance`` + ``tool_radius`` (mm) but
+        the bottom: that one is -inf. Below the part stands the table, so no move between cuts
+        may leave the envelope downward; a ray along a tool axis (which points up, away from the
+        part) leaves it through the top or a side, and one that would lower the tool is refused
+        (:func:`detour_legs`). Without a setup box and with no tool radius the top is today's safe
+        level, ``safe.clearance`` above the highest feed point."""
         feed = tip[~rapid] if (~rapid).any() else tip
-        top = float(np.max(feed[:, 2])) if len(feed) else 0.0
+        lo, hi = (feed.min(axis=0), feed.max(axis=0)) if len(feed) else (np.zeros(3), np.zeros(3))
+        if setup_box is not None:
+            lo, hi = np.minimum(lo, setup_box[0]), np.maximum(hi, setup_box[1])
+        grow = machine.safe.clearance + tool_radius
+        envelope = np.array([[lo[0] - grow, lo[1] - grow, -np.inf], hi + grow])
         positions = machine.positions
         return cls(rapid_tol, rapid_axis_tol, tol, axis_tol, np.radians(machine.safe.max_turn_in_rapid),
-                   top + machine.safe.clearance, np.radians(machine.pole.cone),
+                   envelope, np.radians(machine.pole.cone),
                    None if positions.home is None else positions.home.joints(),
                    None if positions.tool_change is None else positions.tool_change.joints())
 
@@ -353,8 +381,50 @@ def keeps_its_pair(start: State, end: State, cone: float, samples: int = 33) -> 
     return ~through_pole & ends_well
 
 
-#: A tool axis this close to horizontal (its z component) cannot retract up to a level.
-MIN_RISE = 0.05
+#: A tool axis whose horizontal component is at most this is vertical (see :func:`envelope_exit`).
+VERTICAL = 1e-12
+
+
+@dataclass(frozen=True)
+class Exit:
+    """Where rays along tool axes leave the clearance envelope, one row per state (mm, table
+    frame): ``point``, ``t`` mm along the unit axis from the tip, through a side face (``side``)
+    or the top; ``top``: where the move goes on to, the point, or after a side exit straight above
+    it at the envelope's top; ``down``: the ray would have to lower the tip to leave, toward the
+    table under the part (refused)."""
+
+    t: np.ndarray  # (K,) mm
+    point: np.ndarray  # (K, 3) mm
+    side: np.ndarray  # (K,) bool
+    top: np.ndarray  # (K, 3) mm
+    down: np.ndarray  # (K,) bool
+
+
+def envelope_exit(lo: np.ndarray, hi: np.ndarray, tip: np.ndarray, axis: np.ndarray) -> Exit:
+    """The exit of each ray tip + t axis (mm, table frame; unit axes (K, 3)) from the box lo -> hi
+    ((3,) or (K, 3) mm, lo z may be -inf) by the slab method: the smallest t >= 0 with the point
+    outside (0 for a tip outside already, on the boundary included). The box is convex: once the
+    tip is out, so is every point further up the ray, and with it the whole tool, whose shank and
+    holder lie up its axis from the tip. A tip beside the box (below its top) rises vertically from
+    its exit to the top, which stays outside too: the box has no bottom."""
+    lo, hi = np.broadcast_to(lo, tip.shape), np.broadcast_to(hi, tip.shape)
+    # An axis (within rounding) vertical has no side to leave by: its rise would be its retract,
+    # so it retracts to the top as the plane of the safe level had it, even from beside the box.
+    vertical = np.hypot(axis[:, 0], axis[:, 1]) <= VERTICAL
+    within = (tip > lo) & (tip < hi)
+    inside = np.where(vertical, within[:, 2], np.all(within, axis=1))
+    slab = np.where(vertical[:, None], [0.0, 0.0, 1.0], 1.0) * axis
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_face = np.where(slab > 0, (hi - tip) / slab, np.where(slab < 0, (lo - tip) / slab, np.inf))
+    face = np.argmin(t_face, axis=1)
+    t = np.where(inside, np.min(t_face, axis=1), 0.0)
+    # the top face's t is (level - z) / axis z: the retract of the plane of the safe level, to the bit
+    stuck = ~np.isfinite(t)  # a ray that never leaves (down through the open bottom)
+    t = np.where(stuck, 0.0, t)
+    point = tip + t[:, None] * axis
+    side = np.where(inside, face != 2, tip[:, 2] < hi[:, 2]) & ~vertical & ~stuck
+    top = np.where(side[:, None], np.column_stack([point[:, :2], hi[:, 2]]), point)
+    return Exit(t, point, side, top, stuck | (t * axis[:, 2] < -SHORT))
 
 
 def line_legs(moves: Moves, settings: SafeSettings) -> Legs:
@@ -370,58 +440,65 @@ def line_legs(moves: Moves, settings: SafeSettings) -> Legs:
 
 
 def detour_legs(machine: Machine, moves: Moves, settings: SafeSettings) -> tuple[Legs, np.ndarray]:
-    """Up to four legs per move: retract along the start's tool axis to the safe level, turn the
-    axis there with the tip still, travel at that level, descend along the end's tool axis.
-    Returns the legs and, per move, whether a retract or approach needs a level its tool axis
-    cannot rise to (nearly horizontal)."""
+    """Up to six legs per move (mm and rad, table frame): retract along the start's tool axis out
+    of the clearance envelope (:func:`envelope_exit`), rise vertically from a side exit to the
+    envelope's top (the axis held), turn the axis there with the tip still, travel at the top,
+    descend vertically to the end's side exit, approach along the end's tool axis. Returns the
+    legs and, per move, whether its start or end would have to lower the tool to leave the
+    envelope (a tool axis pointing down)."""
     a, b = moves.start, moves.end
-
-    def rise(state: State) -> tuple[np.ndarray, np.ndarray]:
-        need = settings.level - state.tip[:, 2]
-        steep = state.axis[:, 2] > MIN_RISE
-        return np.where((need > 0) & steep, need / np.where(steep, state.axis[:, 2], 1.0), 0.0), (need > 0) & ~steep
-
-    rise_a, flat_a = rise(a)
-    rise_b, flat_b = rise(b)
-    top_a, top_b = a.tip + rise_a[:, None] * a.axis, b.tip + rise_b[:, None] * b.axis
+    lo, hi = settings.envelope
+    out_a, out_b = envelope_exit(lo, hi, a.tip, a.axis), envelope_exit(lo, hi, b.tip, b.axis)
+    exit_a, exit_b, top_a, top_b = out_a.point, out_b.point, out_a.top, out_b.top
     phi_a, phi_b = _angles(a), _angles(b)
-    retract, approach = rise_a > SHORT, rise_b > SHORT
+    retract, approach = out_a.t > SHORT, out_b.t > SHORT
+    rise = np.linalg.norm(top_a - exit_a, axis=1) > SHORT
+    descend = np.linalg.norm(top_b - exit_b, axis=1) > SHORT
     turn = np.any(np.abs(phi_b - phi_a) > 1e-9, axis=1)
     travel = np.linalg.norm(top_b - top_a, axis=1) > SHORT
     lengths, cone = moves.length, settings.cone
     # the waypoints; one with nothing after it is the end itself
-    after_retract = _solve(machine, top_a, a.axis, lengths, a.joints[:, 4], cone).where(turn | travel | approach, b)
+    after_retract = _solve(machine, exit_a, a.axis, lengths, a.joints[:, 4], cone).where(
+        rise | turn | travel | descend | approach, b)
+    after_rise = _solve(machine, top_a, a.axis, lengths, a.joints[:, 4], cone).where(
+        turn | travel | descend | approach, b)
     after_turn = _solve(machine, top_a, axis_from_angles(phi_b[:, 0], phi_b[:, 1]), lengths, b.joints[:, 4],
-                        cone).where(travel | approach, b)
-    after_travel = _solve(machine, top_b, b.axis, lengths, b.joints[:, 4], cone).where(approach, b)
-    start_turn = after_retract.where(retract, a)
+                        cone).where(travel | descend | approach, b)
+    after_travel = _solve(machine, top_b, b.axis, lengths, b.joints[:, 4], cone).where(descend | approach, b)
+    after_descend = _solve(machine, exit_b, b.axis, lengths, b.joints[:, 4], cone).where(approach, b)
+    start_rise = after_retract.where(retract, a)
+    start_turn = after_rise.where(rise, start_rise)
     start_travel = after_turn.where(turn, start_turn)
-    start_approach = after_travel.where(travel, start_travel)
-    present = np.column_stack([retract, turn, travel, approach])
+    start_descend = after_travel.where(travel, start_travel)
+    start_approach = after_descend.where(descend, start_descend)
+    present = np.column_stack([retract, rise, turn, travel, descend, approach])
     count = present.sum(axis=1)
     order = np.cumsum(present, axis=1) - 1  # the leg's place in its move
     pieces = []
     for kind, (start, end, tip0, tip1) in enumerate((
-            (a, after_retract, a.tip, top_a), (start_turn, after_turn, top_a, top_a),
-            (start_travel, after_travel, top_a, top_b), (start_approach, b, top_b, b.tip))):
+            (a, after_retract, a.tip, exit_a), (start_rise, after_rise, exit_a, top_a),
+            (start_turn, after_turn, top_a, top_a), (start_travel, after_travel, top_a, top_b),
+            (start_descend, after_descend, top_b, exit_b), (start_approach, b, exit_b, b.tip))):
         rows = np.flatnonzero(present[:, kind])
         m = len(rows)
         place, total = order[rows, kind], count[rows]
         span = moves.f1[rows] - moves.f0[rows]
-        guard = kind == 2
+        guard = kind == 3  # the travel, kept on its line; the vertical rise and descent lie beside the part
         up = upward_normal(tip0[rows], tip1[rows]) if guard else np.zeros((m, 3))
-        rapid = kind in (1, 2)
+        # retract and approach leave and enter the cut's surroundings: the feed tolerances; the
+        # rest is outside the envelope, at least the clearance from the part: the rapid ones
+        rapid = kind in (1, 2, 3, 4)
         pieces.append(Legs(
             start.rows(rows), end.rows(rows), tip0[rows], tip1[rows], start.axis[rows], end.axis[rows], up,
             np.where(np.any(up != 0, axis=1), 0.5 * settings.rapid_tol, 0.0), np.full(m, guard),
-            np.full(m, kind == 1), phi_a[rows], phi_b[rows],
+            np.full(m, kind == 2), phi_a[rows], phi_b[rows],
             np.full(m, 0.5 * settings.rapid_tol if rapid else settings.tol),
             np.full(m, settings.rapid_axis_tol if rapid else settings.axis_tol), lengths[rows], moves.pose[rows],
             moves.f0[rows] + span * place / total, moves.f0[rows] + span * (place + 1) / total,
             (place < total - 1) | moves.final[rows], rows))
     legs = Legs(*(State.join([getattr(p, name) for p in pieces]) if name in ("start", "end")
                   else np.concatenate([getattr(p, name) for p in pieces]) for name in _LEG_FIELDS))
-    return legs, flat_a | flat_b
+    return legs, out_a.down | out_b.down
 
 
 _LEG_FIELDS = ("start", "end", "tip0", "tip1", "axis0", "axis1", "up", "lift", "guard", "reorient", "phi0", "phi1",
@@ -443,10 +520,12 @@ def _state(blocks: Blocks, index: np.ndarray) -> State:
 
 def _above(machine: Machine, state: State, lengths: np.ndarray, settings: SafeSettings, extra: np.ndarray
            ) -> State:
-    """The state on each tool axis above ``state`` at the safe level raised by ``extra`` (mm)."""
-    rise = np.maximum(settings.level + extra - state.tip[:, 2], 0.0) / np.maximum(state.axis[:, 2], MIN_RISE)
-    return _solve(machine, state.tip + rise[:, None] * state.axis, state.axis, lengths, state.joints[:, 4],
-                  settings.cone)
+    """The state where each tool leaves the clearance envelope with its top raised by ``extra``
+    (mm): up its axis out of it, then, from a side, vertically to the raised top (table frame)."""
+    hi = np.repeat(settings.envelope[1:], len(extra), axis=0)
+    hi[:, 2] = settings.level + extra
+    out = envelope_exit(settings.envelope[0], hi, state.tip, state.axis)
+    return _solve(machine, out.top, state.axis, lengths, state.joints[:, 4], settings.cone)
 
 
 def _moves_between(machine: Machine, poses: MachinePoses, blocks: Blocks, settings: SafeSettings,
@@ -546,13 +625,13 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
     pieces = [(lines, done, keep)]
     detour = np.r_[np.flatnonzero(~every.line), straight[failed]]
     if detour.size:
-        legs, flat = detour_legs(machine, every.rows(detour), settings)
+        legs, down = detour_legs(machine, every.rows(detour), settings)
         split = split_legs(machine, legs, cone)
         pieces.append((legs, split, np.ones(len(split.leg), bool)))
-        for m in np.flatnonzero(flat):
-            problems.append((int(every.pose[detour[m]]), f"the move between cuts cannot reach the safe level "
-                                                         f"(z {settings.level:.3f} mm): the tool axis is nearly "
-                                                         f"horizontal"))
+        for m in np.flatnonzero(down):
+            problems.append((int(every.pose[detour[m]]), "the move between cuts cannot leave the clearance "
+                                                         "envelope: the tool axis points down, and retracting "
+                                                         "along it would lower the tool toward the table"))
         for m in np.unique(legs.move[split.unresolved]):
             problems.append((int(every.pose[detour[m]]), f"the move between cuts cannot be kept within "
                                                          f"{settings.rapid_tol:g} mm of its path"))

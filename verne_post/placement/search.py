@@ -32,7 +32,7 @@ import numpy as np
 
 from ..api import Status, classify, joint_bounds, pose_margins
 from ..checks.headroom import UNREACHABLE, describe, headroom, smallest
-from ..checks.limits import motion_samples
+from ..checks.limits import Violation, motion_samples
 from ..checks.stage import Checked, check_poses
 from ..kinematics import machine_ik_working, margins, module_ik_working
 from ..machine import Machine
@@ -65,6 +65,8 @@ class Placement:
     reason: str  # why no offset works ("" when feasible)
     screened: int  # candidate offsets screened
     seconds: float
+    collisions: tuple[Violation, ...] = ()  # the bodies that meet at the best offset, where that is why
+
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (mm)."""
@@ -215,11 +217,44 @@ def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exa
     return np.where(preferred_runs | other_runs | screen.in_cone, best, np.minimum(best, -1e-9))
 
 
-def _score(room: np.ndarray) -> np.ndarray:
+def _score(room: np.ndarray, overhang: np.ndarray | None = None) -> np.ndarray:
     """One number per offset from (K, S) headrooms: the smallest where every pose runs, else
-    minus the share of poses that fail (so the search is led towards feasibility)."""
+    minus the share of poses that fail (so the search is led towards feasibility); an offset
+    that puts the part off the table (``overhang`` mm > 0, :func:`_overhang`) below every other,
+    the less the overhang the better."""
     failing = np.mean(room < 0, axis=1)
-    return np.where(failing > 0, -failing, np.min(room, axis=1))
+    score = np.where(failing > 0, -failing, np.min(room, axis=1))
+    return score if overhang is None else np.where(overhang > 0, -1.0 - overhang / 1e4, score)
+
+
+@dataclass(frozen=True)
+class _Seat:
+    """The part's footprint (mm, part frame: the setup's box, else the feed points') and the
+    table's top face (table frame), for :func:`_overhang`; None where bodies are not checked."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    radius: float
+    top: float
+
+    @classmethod
+    def of(cls, machine: Machine, poses: MachinePoses) -> _Seat | None:
+        if not machine.bodies.check:
+            return None
+        box = poses.setup.bounds()
+        if box is None:  # the part's material under its deepest cut: safe.clearance at least
+            feed = poses.tip[~poses.rapid] if (~poses.rapid).any() else poses.tip
+            box = np.array([feed.min(axis=0) - [0.0, 0.0, machine.safe.clearance], feed.max(axis=0)])
+        table = machine.bodies.table
+        return cls(box[0], box[1], 0.5 * table.diameter, table.top)
+
+    def overhang(self, offsets: np.ndarray) -> np.ndarray:
+        """(K,) mm: how far the part at each offset (K, 3) lies off the table's top face (beyond
+        its rim, or below its face); 0 where it sits on it."""
+        corners = np.array([[x, y] for x in (self.lo[0], self.hi[0]) for y in (self.lo[1], self.hi[1])])
+        rim = np.linalg.norm(offsets[:, None, :2] + corners[None], axis=2).max(axis=1) - self.radius
+        below = self.top - (offsets[:, 2] + self.lo[2])
+        return np.maximum(np.maximum(rim, below), 0.0)
 
 
 def _search_box(machine: Machine, poses: MachinePoses) -> tuple[np.ndarray, np.ndarray]:
@@ -249,7 +284,7 @@ def _grid(lower: np.ndarray, upper: np.ndarray, counts: tuple[int, int, int]) ->
 
 
 def _pattern_search(machine: Machine, coarse: _Points, fine: _Points, starts: np.ndarray, step: float,
-                    tick: Callable[[], None]) -> tuple[np.ndarray, np.ndarray, int]:
+                    tick: Callable[[], None], seat: _Seat | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Maximise the score from each start (B, 3): move to the best of the 26 neighbours at
     ``step`` (mm) while that improves, else halve the step, down to FINEST_STEP. Steps of
     FINE_FROM mm and more use the ``coarse`` screen, smaller ones the ``fine`` one. Returns
@@ -258,11 +293,12 @@ def _pattern_search(machine: Machine, coarse: _Points, fine: _Points, starts: np
     steps = np.full(len(current), step)
     evaluations = 0
     for screen, smallest_step in ((coarse, FINE_FROM), (fine, FINEST_STEP)):
-        score = _score(_screen_headroom(machine, screen, current))
+        score = _score(_screen_headroom(machine, screen, current), None if seat is None else seat.overhang(current))
         while np.any(steps >= smallest_step):
             active = np.flatnonzero(steps >= smallest_step)
             trial = (current[active, None] + steps[active, None, None] * _DIRECTIONS[None]).reshape(-1, 3)
-            scores = _score(_screen_headroom(machine, screen, trial)).reshape(len(active), -1)
+            scores = _score(_screen_headroom(machine, screen, trial),
+                            None if seat is None else seat.overhang(trial)).reshape(len(active), -1)
             evaluations += len(trial)
             best = np.argmax(scores, axis=1)
             better = scores[np.arange(len(active)), best] > score[active] + IMPROVEMENT
@@ -298,16 +334,22 @@ class _Verdict:
 def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> _Verdict:
     """The full checks of the program (poses at work offset 0) at ``offset`` (mm), with the
     smallest headroom over block ends and motion samples and the poses to screen next."""
-    shifted = replace(poses, tip=poses.tip + offset)
+    shifted = poses.shifted(offset)
     return _verdict(machine, poses, shifted, check_poses(machine, shifted, options))
 
 
-def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions) -> np.ndarray | None:
-    """The room's full check at ``offset`` (mm): None where the program runs, else the CL poses
-    to screen next. It stops at the first failure (see :func:`verne_post.checks.stage.check_poses`)."""
-    shifted = replace(poses, tip=poses.tip + offset)
+def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions
+             ) -> tuple[np.ndarray | None, bool]:
+    """The room's full check at ``offset`` (mm): (None where the program runs, else the CL poses
+    to screen next; whether the screen can see why: False where only bodies meet, which the
+    screen's joint headroom does not know). It stops at the first failure (see
+    :func:`verne_post.checks.stage.check_poses`)."""
+    shifted = poses.shifted(offset)
     checked = check_poses(machine, shifted, options, first_failure=True)
-    return _verdict(machine, poses, shifted, checked).worst if checked.violations else None
+    if not checked.violations:
+        return None, True
+    screenable = any(v.kind != "collision" for v in checked.violations)
+    return _verdict(machine, poses, shifted, checked).worst, screenable
 
 
 def _verdict(machine: Machine, poses: MachinePoses, shifted: MachinePoses, checked: Checked) -> _Verdict:
@@ -350,34 +392,41 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
 
     Per direction: bisection on the screened poses (exact kernel) to ROOM_RESOLUTION, its inner
     end run through the full checks. Where those fail, the failing poses join the screen and
-    the bisection runs again below; what the screen cannot see (a rapid's joint-space line, a
-    cut that needs both angle pairs) is then bisected with the full checks themselves.
+    the bisection runs again below; what the screen cannot see (bodies that meet, a rapid's
+    joint-space line, a cut that needs both angle pairs) is then bisected with the full checks
+    themselves: the room is the room of everything the post checks, the bodies included.
     """
     directions = np.repeat(np.eye(3), 2, axis=0) * np.tile([-1.0, 1.0], 3)[:, None]
     inside = np.zeros(6)  # farthest distance known to run (full checks)
     outside = np.full(6, ROOM_LIMIT)  # nearest distance known to fail
     pending = np.arange(6)
-    for _ in range(ROUNDS):
+    def runs(distance: float, d: int) -> bool:
+        return _confirm(machine, poses, offset + distance * directions[d], options)[0] is None
+
+    for round_ in range(ROUNDS):
         screen = points.screen(rows)
         lo, hi = _bisect(machine, screen, offset, directions[pending], inside[pending], outside[pending])
         outside[pending] = hi
         tick()
         failed = []
         for k, d in enumerate(pending):
-            worst = _confirm(machine, poses, offset + lo[k] * directions[d], options)
+            worst, screenable = _confirm(machine, poses, offset + lo[k] * directions[d], options)
             tick()
             if worst is None:
                 inside[d] = lo[k]
                 continue
             outside[d] = lo[k]
             grown = np.union1d(rows, worst)
-            if len(grown) == len(rows):  # nothing new to screen: bisect with the full checks
+            if not screenable or len(grown) == len(rows) or round_ == ROUNDS - 1:
+                # what the screen cannot see (bodies, a rapid's joint-space line, a cut that
+                # needs both angle pairs): bisect with the full checks themselves
                 while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
                     middle = (inside[d] + outside[d]) / 2.0
-                    if _confirm(machine, poses, offset + middle * directions[d], options) is None:
+                    if runs(middle, d):
                         inside[d] = middle
                     else:
                         outside[d] = middle
+                    tick()
                 continue
             rows = grown
             failed.append(d)
@@ -416,7 +465,9 @@ def _search(machine: Machine, poses: MachinePoses, options: PostOptions, tick: C
     lower, upper = _search_box(machine, poses)
     counts = np.array([9, 9, 7])
     grid = _grid(lower, upper, counts)
-    scores = _score(_screen_headroom(machine, points.screen(coarse_rows), grid))
+    seat = _Seat.of(machine, poses)
+    scores = _score(_screen_headroom(machine, points.screen(coarse_rows), grid),
+                    None if seat is None else seat.overhang(grid))
     screened = len(grid)
     tick("coarse grid")
     step = float(np.max((upper - lower) / (counts - 1))) / 2.0
@@ -425,7 +476,7 @@ def _search(machine: Machine, poses: MachinePoses, options: PostOptions, tick: C
     best: tuple[np.ndarray, _Verdict, _Points, np.ndarray] | None = None
     for _ in range(ROUNDS):
         candidates, found, count = _pattern_search(machine, points.screen(coarse_rows), points.screen(rows), starts,
-                                                   step, lambda: tick("search"))
+                                                   step, lambda: tick("search"), seat)
         screened += count
         candidates = np.round(candidates, 3)  # a micrometre is plenty for a setter
         verdict = _verify(machine, poses, candidates[0], options)
@@ -452,9 +503,15 @@ def place(machine: Machine, poses: MachinePoses, options: PostOptions,
     offset, verdict, points, rows, screened = _search(machine, poses, options, progress)
     line = int(poses.line[verdict.pose])
     if not verdict.runs:
-        reason = diagnose(machine, poses, options, verdict)
+        # bodies that meet where the joints can go: the collision is the answer, not the search
+        # (where a limit fails too, the limit is the reason and the bodies' places are moot)
+        found = verdict.checked.violations
+        collisions = tuple(v for v in found if v.kind == "collision") \
+            if all(v.kind == "collision" for v in found) else ()
+        reason = (f"at the best offset found, line {collisions[0].line}: {collisions[0].message}" if collisions
+                  else diagnose(machine, poses, options, verdict))
         return Placement(tuple(float(v) for v in offset), False, verdict.margin, verdict.limit, line,
-                         ((0.0, 0.0),) * 3, reason, screened, time.perf_counter() - clock)
+                         ((0.0, 0.0),) * 3, reason, screened, time.perf_counter() - clock, collisions)
     room = _room(machine, poses, points, rows, offset, options, lambda: progress("room"))
     return Placement(tuple(float(v) for v in offset), True, verdict.margin, verdict.limit, line, room, "",
                      screened, time.perf_counter() - clock)

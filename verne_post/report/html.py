@@ -6,7 +6,8 @@ lengths and Delta, work offset and how it was chosen, cycle time, violations and
 linked to the CL lines they name); joint positions, velocities and accelerations over time
 against their limits; the planned tool-tip feed against the programmed one; the singularity and
 rod-clearance margins and the smallest headroom along the program; the time budget per tool;
-and workspace maps with the program's tool tips.
+workspace maps with the program's tool tips; and, when the caller gives one, a 3D view of the
+machine's bodies, the setup and the tool path with its collisions and near misses (``scene3d``).
 
 Plots are drawn from decimated copies of the data (per display column the smallest and the
 largest value, so no peak is lost): a 100,000-point job stays responsive. The checks never see
@@ -36,10 +37,11 @@ from ..placement.workspace import boundary_labels, workspace
 from ..planning.schedule import Schedule, time_budget
 from ..planning.stage import feed_speed
 from ..planning.timing import Limits
+from .scene3d import SCENE_SCRIPT, SCENE_STYLE, scene_lines, scene_section
+from .series import COLUMNS, envelope, rounded
 
-#: Trajectory samples taken over the whole cycle, and display columns after decimation.
+#: Trajectory samples taken over the whole cycle.
 SAMPLES = 40_000
-COLUMNS = 600
 #: CL lines shown around each line a message names, and messages listed at most.
 CONTEXT = 3
 MAX_MESSAGES = 200
@@ -47,40 +49,11 @@ _LINE = re.compile(r":(\d+): ")
 _UNITS = ("mm", "mm", "mm", "deg", "deg")
 
 
-def envelope(x: np.ndarray, y: np.ndarray, bins: int = COLUMNS) -> tuple[list, list]:
-    """Decimate one series over increasing ``x``: per bin of equal width in x the samples
-    holding its smallest and its largest value, in x order, so no peak is lost (NaN: a gap).
-    Returns (x, y) lists, rounded."""
-    if len(x) <= 2 * bins:
-        keep = np.arange(len(x))
-    else:
-        starts = np.unique(np.r_[0, np.searchsorted(x, np.linspace(x[0], x[-1], bins + 1)[1:-1])])
-        starts = starts[starts < len(x)]
-        bin_of = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(x)]))
-        picks = []
-        for fill, reduce in ((np.inf, np.minimum), (-np.inf, np.maximum)):
-            data = np.where(np.isnan(y), fill, y)
-            hits = np.flatnonzero(data == reduce.reduceat(data, starts)[bin_of])
-            picks.append(hits[np.unique(bin_of[hits], return_index=True)[1]])
-        keep = np.unique(np.concatenate(picks))
-    return _rounded(x[keep], 7), _rounded(y[keep])
-
-
 def _series(x: np.ndarray, columns: dict[str, np.ndarray], lines: np.ndarray) -> dict[str, Any]:
     """Each column decimated on its own, and a CL line lookup over x (for the tooltips)."""
     step = max(1, len(x) // (4 * COLUMNS))
     return {"series": {name: envelope(x, values) for name, values in columns.items()},
-            "line_x": _rounded(x[::step], 7), "line": [int(v) for v in lines[::step]]}
-
-
-def _rounded(values: np.ndarray, digits: int = 4) -> list:
-    """Floats with ``digits`` significant digits; NaN and infinities as None (JSON null)."""
-    values = np.asarray(values, dtype=float)
-    finite = np.isfinite(values)
-    scale = np.where(finite & (values != 0), 10.0 ** (digits - 1 - np.floor(np.log10(np.abs(np.where(
-        finite & (values != 0), values, 1.0))))), 1.0)
-    rounded = np.round(values * scale) / scale
-    return [float(v) if ok else None for v, ok in zip(rounded, finite, strict=True)]
+            "line_x": rounded(x[::step], 7), "line": [int(v) for v in lines[::step]]}
 
 
 def _trajectory(machine: Machine, result: PostResult) -> dict[str, Any] | None:
@@ -187,7 +160,7 @@ def _workspace_maps(machine: Machine, result: PostResult, offset: np.ndarray) ->
     step = max(1, len(poses) // 4000)
     tips = poses.tip[::step]
     return {"tool_length": length, "tilt": tilt, "rotary": 0.0, "sections": sections,
-            "tips": [_rounded(tips[:, k], 4) for k in range(3)], "offset": [float(v) for v in offset]}
+            "tips": [rounded(tips[:, k], 4) for k in range(3)], "offset": [float(v) for v in offset]}
 
 
 def _messages(result: PostResult) -> tuple[list[tuple[str, int | None, str]], set[int]]:
@@ -223,8 +196,9 @@ def _table(rows: list[tuple[str, str]]) -> str:
         "</table>"
 
 
-def render(machine: Machine, options: PostOptions, result: PostResult) -> str:
-    """The report page (ASCII: anything else as character references)."""
+def render(machine: Machine, options: PostOptions, result: PostResult, scene: dict | None = None) -> str:
+    """The report page (ASCII: anything else as character references). ``scene``: the 3D view's
+    bodies, setup and path (:mod:`verne_post.report.scene3d`); None: the section says none was given."""
     report = result.report(machine, options)
     offset = np.asarray(report["work_offset_mm"])
     messages, named = _messages(result)
@@ -241,6 +215,8 @@ def render(machine: Machine, options: PostOptions, result: PostResult) -> str:
                     f"<td><a href=\"#cl-{t['line']}\">{t['line']}</a></td><td>{html.escape(t['length_from'])}</td></tr>"
                     for t in report["tools"])
     named |= {t["line"] for t in report["tools"]}
+    named |= scene_lines(scene)  # the 3D findings link to their lines
+    section = scene_section(scene)
     summary = _table([
         ("CL file", html.escape(report["source"])),
         ("machine", html.escape(f"{machine.name} ({report['machine']})")),
@@ -280,15 +256,18 @@ def render(machine: Machine, options: PostOptions, result: PostResult) -> str:
     page = _PAGE.format(
         title=html.escape(Path(report["source"]).name), summary=summary, tools=tools,
         messages=f"<ul class=\"messages\">{listing}</ul>" if listing else "<p>None.</p>",
-        excerpts=_cl_excerpts(result.poses.source, named), data=payload, script=_SCRIPT, style=_STYLE,
+        excerpts=_cl_excerpts(result.poses.source, named), data=payload, script=_SCRIPT,
+        style=_STYLE + (SCENE_STYLE if scene is not None else ""), scene=section,
+        scene_script=f"\n<script>{SCENE_SCRIPT}</script>" if scene is not None else "",
         timing_note=_BETWEEN_NOTE if data["trajectory"] else "<p class=\"note\">No time-parametrisation "
                     "(--no-timing, or violations): joint traces, feeds and the time budget need it.</p>")
     return page.encode("ascii", "xmlcharrefreplace").decode("ascii")
 
 
-def write_html_report(path: str | Path, machine: Machine, options: PostOptions, result: PostResult) -> None:
-    """Write the report page atomically."""
-    page = render(machine, options, result)
+def write_html_report(path: str | Path, machine: Machine, options: PostOptions, result: PostResult,
+                      scene: dict | None = None) -> None:
+    """Write the report page atomically (``scene``: as :func:`render`)."""
+    page = render(machine, options, result, scene)
     with atomic_write(path) as handle:
         handle.write(page)
 
@@ -338,10 +317,10 @@ _PAGE = """<!DOCTYPE html>
 <h2>Workspace</h2>
 <p id="workspace-caption" class="note"></p>
 <div class="maps" id="maps"></div>
-<h2>CL lines named above</h2>
+{scene}<h2>CL lines named above</h2>
 {excerpts}
 <script type="application/json" id="report-data">{data}</script>
-<script>{script}</script>
+<script>{script}</script>{scene_script}
 </body></html>
 """
 

@@ -182,7 +182,7 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
 
 
 def path_findings(program: GcodeProgram, machine: Machine, reference: Reference, motion: Motion, tol: float,
-                  axis_tol: float, findings: list[Finding], skip: int, rapid_tol: float, top: float
+                  axis_tol: float, findings: list[Finding], skip: int, rapid_tol: float, box: np.ndarray
                   ) -> tuple[float, float, float | None, float | None, int, float | None, float | None]:
     """Reach, order, deviation, rapid and feed findings; returns the largest tip deviation (mm),
     axis deviation (deg), feed ratio, peak feed ratio within a block, the number of CL points
@@ -240,7 +240,7 @@ def path_findings(program: GcodeProgram, machine: Machine, reference: Reference,
                                 cl_line=int(cl_lines[nearest[k]]), value=float(np.degrees(axis_total[k])),
                                 limit=float(np.degrees(axis_tol))))
     feed_ratio, peak_ratio = _feed(program, reference, machine, matched, pieces, curves, follows, findings)
-    rapid_dev, rapid_dip = _rapids(program, reference, motion, pieces, skip, rapid_tol, top, findings)
+    rapid_dev, rapid_dip = _rapids(program, reference, motion, pieces, skip, rapid_tol, box, findings)
     return (float(tip_total.max(initial=0.0)), float(np.degrees(axis_total.max(initial=0.0))), feed_ratio,
             peak_ratio, int(np.count_nonzero(matched[skip:] >= 0)), rapid_dev, rapid_dip)
 
@@ -267,13 +267,16 @@ def _from_ray(point: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> n
 
 
 def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces: _Pieces, skip: int,
-            rapid_tol: float, top: float, findings: list[Finding]) -> tuple[float | None, float | None]:
+            rapid_tol: float, box: np.ndarray, findings: list[Finding]) -> tuple[float | None, float | None]:
     """Rapid findings against the CL path, from the block ends and samples of the rapid blocks.
 
     A rapid's tip may be on the CL rapid's straight line (within ``rapid_tol`` mm, never more
     than :data:`RAPID_DIP_TOL` below it), on a retract or approach ray (a CL pose's tool axis
-    from its tip outward, within ``rapid_tol``), or above every feed point of the program (z at
-    least ``top``, table frame); the sampling bound of each move counts against it. Returns the
+    from its tip outward, within ``rapid_tol``), or outside the bounding box of the program's feed
+    points (``box``, (2, 3) mm, table frame): above it, or beside it and not below its bottom,
+    away from every feed point either way (a move between cuts that leaves the clearance
+    envelope through a side rises beside the part); the sampling bound of each move counts
+    against it, the whole ball of that radius about the sample must be outside. Returns the
     largest distance from where a rapid may be and the largest dip below its CL line (mm) of the
     points judged by their line, None without rapids."""
     ends, curves = motion.ends, motion.curves
@@ -299,14 +302,21 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces:
     np.minimum.at(on_ray, owner, ray)
     np.minimum.at(nearest_line, owner, line)
     np.minimum.at(least_dip, owner, dip)
-    above = point[:, 2] - bound >= top
-    deviation = np.where(above, 0.0, np.minimum(on_line, on_ray))
-    judged = ~above & (on_ray > rapid_tol)  # points that only their CL line can justify
+    # the sample widened by its bound on every side: a box of half-width ``bound`` about it
+    lo, hi = box
+    low, high = point - bound[:, None], point + bound[:, None]
+    above = low[:, 2] >= hi[2]
+    # beside: clear of the box horizontally, and no lower than its lowest feed point (under the
+    # part stands the table, never a place to pass)
+    beside = np.any((low[:, :2] >= hi[:2]) | (high[:, :2] <= lo[:2]), axis=1) & (low[:, 2] >= lo[2])
+    outside = above | beside
+    deviation = np.where(outside, 0.0, np.minimum(on_line, on_ray))
+    judged = ~outside & (on_ray > rapid_tol)  # points that only their CL line can justify
     last = pieces.last[block]
     for k in worst_per_block(block, deviation - rapid_tol):
         findings.append(Finding(int(program.line[block[k]]), "rapid", f"rapid tool tip {nearest_line[k]:.4f} mm "
                                 f"from its CL line and {least_dip[k]:.4f} mm below it (max {rapid_tol:g} mm and "
-                                f"none below), on no retract ray and below the highest feed point",
+                                f"none below), on no retract ray and inside the feed points' box",
                                 cl_line=int(reference.line[last[k]]), value=float(min(deviation[k], 1e300)),
                                 limit=rapid_tol))
     return (float(np.max(np.where(np.isfinite(deviation), deviation, nearest_line))),

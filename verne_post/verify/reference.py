@@ -81,7 +81,7 @@ class Finding:
 
     line: int
     kind: str  # program, tool, limit, unreachable, rod_clearance, singular, joint_speed, reach, order, motion,
-    #            tip, axis, feed
+    #            collision, tip, axis, feed
     message: str
     cl_line: int | None = None
     value: float | None = None  # the figure found (mm, deg, ratio or margin, as the message says)

@@ -40,10 +40,12 @@ from typing import Any
 
 import numpy as np
 
+from ..bodies.world import ProgramBodies
 from ..cl.toolpath import Toolpath
 from ..errors import InputError
 from ..machine import Machine
 from .cl_path import path_findings, rapid_block_dips
+from .collisions import collision_findings
 from .gcode_reader import GcodeProgram, ReadState, read_gcode
 from .limits import joint_speed, limit_findings, tool_lengths
 from .reference import DEFAULT_AXIS_TOL, DEFAULT_RAPID_TOL, DEFAULT_TOL, Finding, Reference
@@ -72,11 +74,12 @@ class Verification:
     smallest_margins: dict[str, float | None]
     rapid_tol: float = DEFAULT_RAPID_TOL  # mm
     # mm: with the CL path, the largest distance of a rapid's tip from where it may be (its CL line,
-    # not below it; a retract or approach ray along a CL pose's axis; or above every feed point)
+    # not below it; a retract or approach ray along a CL pose's axis; or outside the feed points' box)
     rapid_deviation: float | None = None
     # mm: with the CL path, the largest dip below a rapid's CL line; without, below the lower end
     # of each run of rapid blocks
     rapid_dip: float | None = None
+    bodies_checked: bool = False  # every block checked for bodies that meet (the setup and the tools known)
 
     @property
     def ok(self) -> bool:
@@ -90,7 +93,7 @@ class Verification:
                          f"{self.axis_deviation:.3f} DEG,")
         if self.rapid_deviation is not None:
             parts.append(f"MAX RAPID DEVIATION {self.rapid_deviation:.4f} MM,")
-        parts.append("ALL LIMITS HELD")
+        parts.append("ALL LIMITS HELD, NO BODIES MEET" if self.bodies_checked else "ALL LIMITS HELD")
         return " ".join(parts)
 
     def report(self) -> dict[str, Any]:
@@ -115,6 +118,7 @@ class Verification:
             "rapid_tol_mm": self.rapid_tol,
             "max_rapid_deviation_mm": _number(self.rapid_deviation),
             "max_rapid_dip_mm": _number(self.rapid_dip),
+            "bodies_checked": self.bodies_checked,
             "smallest_margins": {k: _number(v) for k, v in self.smallest_margins.items()},
         }
 
@@ -126,8 +130,11 @@ def _number(value: float | None) -> float | None:
 def verify_program(text: str | Iterable[str], machine: Machine, *, source: str = "<program>",
                    against: Toolpath | Reference | None = None,
                    work_offset: tuple[float, float, float] | None = None, tol: float | None = None,
-                   axis_tol: float | None = None, rapid_tol: float | None = None) -> Verification:
+                   axis_tol: float | None = None, rapid_tol: float | None = None,
+                   bodies: ProgramBodies | None = None) -> Verification:
     """Verify program text (one string or its lines) for ``machine``; see the module docstring.
+    ``bodies``: the setup (part frame, placed at that work offset) and the tools' shapes, to check
+    for collisions.
 
     ``against``: the CL path, as read (part frame: the work offset is ``work_offset``, else the
     program header's, else the machine's) or as a :class:`Reference` (table frame). ``tol`` mm
@@ -148,22 +155,28 @@ def verify_program(text: str | Iterable[str], machine: Machine, *, source: str =
     offset = tuple(work_offset or program.work_offset or machine.work_offset)
     reference = against if isinstance(against, Reference) or against is None else Reference.of(against, offset)
     return verify_blocks(program, machine, reference, tol, axis_tol, offset, rapid_tol=rapid_tol,
-                         top=None if reference is None else feed_top(reference))
+                         box=None if reference is None else feed_box(reference), bodies=bodies)
 
 
-def feed_top(reference: Reference) -> float:
-    """mm, table-frame z: the highest feed point of a CL path (of any point, if it has no feed)."""
+def feed_box(reference: Reference) -> np.ndarray:
+    """(2, 3) mm, table frame: the lo and hi corners of the bounding box of a CL path's feed
+    points (of every point, if it has no feed); an empty path's box is empty (lo +inf, hi -inf),
+    so that every point is outside it."""
     feed = reference.tip[~reference.rapid] if (~reference.rapid).any() else reference.tip
-    return float(np.max(feed[:, 2])) if len(feed) else -math.inf
+    if not len(feed):
+        return np.array([[math.inf] * 3, [-math.inf] * 3])
+    return np.array([feed.min(axis=0), feed.max(axis=0)])
 
 
 def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference | None, tol: float,
                   axis_tol: float, work_offset: Iterable[float] = (0.0, 0.0, 0.0), *, overlap: bool = False,
-                  final: bool = True, rapid_tol: float = DEFAULT_RAPID_TOL, top: float | None = None
-                  ) -> Verification:
+                  final: bool = True, rapid_tol: float = DEFAULT_RAPID_TOL, box: np.ndarray | None = None,
+                  bodies: ProgramBodies | None = None) -> Verification:
     """The checks of :func:`verify_program` on a program already read (tol mm, axis_tol deg,
-    rapid_tol mm; ``top``: the highest feed point of the whole CL path, table-frame z mm, above
-    which a rapid may go anywhere; default: the reference's).
+    rapid_tol mm; ``box``: the bounding box of the whole CL path's feed points, (2, 3) mm, table
+    frame, outside which (above it, or beside it and not below its bottom) a rapid may go
+    anywhere; default: the reference's). With ``bodies`` (the setup and the tools' shapes) every
+    block is checked for bodies that meet (:mod:`verne_post.verify.collisions`).
 
     A part of a program (:class:`Verifier`): with ``overlap`` the first block and the first CL
     pose are the last ones of the part before, already verified: only the motion from there
@@ -183,6 +196,9 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     block, interior, samples = motion.all_samples()
     findings += limit_findings(machine, program.line[block], interior, samples)
     speed_ratio = joint_speed(program, machine, findings)
+    if bodies is not None:
+        findings += collision_findings(program, machine, bodies, lengths, motion.ends.tip,
+                                       np.asarray(tuple(work_offset), dtype=float))
     tip_dev = axis_dev = feed_ratio = peak_ratio = None
     reached = None
     rapid_dev: float | None
@@ -191,7 +207,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     if reference is not None:
         tip_dev, axis_dev, feed_ratio, peak_ratio, reached, rapid_dev, rapid_dip = path_findings(
             program, machine, reference, motion, tol, np.radians(axis_tol), findings, skip, rapid_tol,
-            feed_top(reference) if top is None else top)
+            feed_box(reference) if box is None else box)
     else:
         rapid_dev, rapid_dip = None, rapid_block_dips(program, motion, rapid_tol, findings)
     if overlap:  # what the part before found at its last block
@@ -212,6 +228,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
         smallest_margins={name: _nanmin(getattr(margins, name)) for name in
                           ("serial", "parallel", "machine", "rod_clearance")},
         rapid_tol=rapid_tol, rapid_deviation=rapid_dev, rapid_dip=rapid_dip,
+        bodies_checked=bodies is not None and machine.bodies.check,
     )
 
 
@@ -228,10 +245,11 @@ class Verifier:
 
     def __init__(self, machine: Machine, *, source: str, tol: float, axis_tol: float,
                  work_offset: tuple[float, float, float], rapid_tol: float = DEFAULT_RAPID_TOL,
-                 top: float | None = None) -> None:
+                 box: np.ndarray | None = None, bodies: ProgramBodies | None = None) -> None:
         self.machine, self.source, self.tol, self.axis_tol, self.work_offset = (machine, source, tol, axis_tol,
                                                                                  work_offset)
-        self.rapid_tol, self.top = rapid_tol, top  # mm; the whole program's highest feed point (table z)
+        self.rapid_tol, self.box = rapid_tol, box  # mm; the whole program's feed points' box (table frame)
+        self.bodies = bodies  # the setup and the tools' shapes: collisions checked
         self.controller = machine.controller.profile()  # how each part's text is read
         self.state: ReadState | None = None
         self.last: GcodeProgram | None = None  # the last block so far (one row)
@@ -247,14 +265,16 @@ class Verifier:
             reference = self.pending.then(reference)
         if len(program) == 0 and not final:
             self.parts.append(verify_blocks(program, self.machine, None, self.tol, self.axis_tol, self.work_offset,
-                                            final=False, rapid_tol=self.rapid_tol, top=self.top))
+                                            final=False, rapid_tol=self.rapid_tol, box=self.box,
+                                            bodies=self.bodies))
             self.pending = reference
             return
         overlap = self.last is not None
         if overlap:
             program = _joined_program(self.last, program)
         self.parts.append(verify_blocks(program, self.machine, reference, self.tol, self.axis_tol, self.work_offset,
-                                        overlap=overlap, final=final, rapid_tol=self.rapid_tol, top=self.top))
+                                        overlap=overlap, final=final, rapid_tol=self.rapid_tol, box=self.box,
+                                        bodies=self.bodies))
         if len(program):
             self.last = _last_block(program)
         if reference is not None and len(reference.tip):
@@ -294,6 +314,7 @@ class Verifier:
             feed_ratio=most("feed_ratio"), peak_feed_ratio=most("peak_feed_ratio"),
             joint_speed_ratio=per_name("joint_speed_ratio", max), smallest_margins=per_name("smallest_margins", min),
             rapid_tol=self.rapid_tol, rapid_deviation=most("rapid_deviation"), rapid_dip=most("rapid_dip"),
+            bodies_checked=bool(parts) and all(part.bodies_checked for part in parts),
         )
 
 

@@ -1,0 +1,1 @@
+"""Bodies of the machine and the setup: shapes, distances, the sampling bound."""

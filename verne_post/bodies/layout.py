@@ -1,0 +1,190 @@
+"""Where every body of the machine is, for N joint sets: pure functions of the kinematics' results.
+
+Frames (VERNE-KINEMATICS.md): the base frame R_b (z down) carries the guideways; the platform
+pose is Trans(P) Rot(x, alpha); the table frame R_t is bT_t = Tz(da) Rx(theta1) Tz(dt) Rx(pi)
+Rz(theta2), and the cradle frame is that at theta2 = 0 (the cradle tilts, the table turns in it).
+The head bodies are cylinders on the spindle axis, measured from the tool tip U = P + Rot(x,
+alpha) (0, 0, Delta). Units: mm, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kinematics.geometry import Geometry
+from .config import BodiesConfig
+from .convex import Boxes, Capsules, Cylinders
+
+
+@dataclass(frozen=True)
+class Stack:
+    """One tool's bodies on the spindle axis: names, and their spans (mm from the tool tip toward
+    the spindle) and radii (mm). The first is the cutter."""
+
+    names: tuple[str, ...]
+    start: np.ndarray  # (H,) mm from the tip
+    end: np.ndarray  # (H,)
+    radius: np.ndarray  # (H,)
+
+
+def tool_stack(bodies: BodiesConfig, length: float, diameter: float | None,
+               holder: tuple[tuple[float, float], ...] | None = None, flute_length: float | None = None) -> Stack:
+    """The head bodies of a tool of gauge ``length`` (mm, nose to tip) and cutter ``diameter``
+    (mm; the machine file's default where None): cutter from the tip, shank up to the holder,
+    the holder's cylinders ``(diameter, length)`` from the nose toward the tip (the machine's
+    default holder where None), the spindle housing above the nose. A holder longer than the
+    tool is cut at the tip's end of its flutes."""
+    d = bodies.cutter_diameter if diameter is None or diameter <= 0 else diameter
+    pieces = [(h.diameter, h.length) for h in bodies.holder] if holder is None else list(holder)
+    flutes = min(flute_length or bodies.flute_length or 3.0 * d, length)
+    names, start, end, radius = ["cutter"], [0.0], [flutes], [0.5 * d]
+    top = length  # the nose, where the holder's stack starts downward
+    lower = length - sum(h for _, h in pieces)
+    if lower > flutes:
+        names.append("shank")
+        start.append(flutes)
+        end.append(lower)
+        radius.append(0.5 * d)
+    for k, (diameter_k, height) in enumerate(pieces):
+        bottom = max(top - height, flutes)
+        if top > bottom:
+            names.append("holder" if len(pieces) == 1 else f"holder {k + 1}")
+            start.append(bottom)
+            end.append(top)
+            radius.append(0.5 * diameter_k)
+        top = bottom
+    names.append("spindle")
+    start.append(length)
+    end.append(length + bodies.spindle.length)
+    radius.append(0.5 * bodies.spindle.diameter)
+    return Stack(tuple(names), np.array(start), np.array(end), np.array(radius))
+
+
+def table_rotation(theta1: np.ndarray, theta2: np.ndarray) -> np.ndarray:
+    """(N, 3, 3): the rotation of bT_t (table frame to base frame), true angles in rad."""
+    c1, s1, c2, s2 = np.cos(theta1), np.sin(theta1), np.cos(theta2), np.sin(theta2)
+    zero = np.zeros_like(c1)
+    # Rx(theta1) Rx(pi) = Rx(theta1 + pi); times Rz(theta2)
+    ca, sa = -c1, -s1
+    return np.stack([np.stack([c2, -s2, zero], -1),
+                     np.stack([ca * s2, ca * c2, -sa], -1),
+                     np.stack([sa * s2, sa * c2, ca], -1)], -2)
+
+
+def table_origin(da: float, dt: float, theta1: np.ndarray) -> np.ndarray:
+    """(N, 3) mm, base frame: the table frame's origin, Tz(da) Rx(theta1) (0, 0, dt)."""
+    return np.column_stack([np.zeros_like(theta1), -dt * np.sin(theta1), da + dt * np.cos(theta1)])
+
+
+def to_table(points: np.ndarray, rotation: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """Base-frame points (N, K, 3) or (N, 3) (mm) in the table frame of each of the N joint sets."""
+    rel = points - (origin[:, None] if points.ndim == 3 else origin)
+    return np.einsum("nji,n...j->n...i", rotation, rel)
+
+
+def to_cradle(points: np.ndarray, theta2: np.ndarray) -> np.ndarray:
+    """Table-frame points (N, K, 3) or (N, 3) in the cradle frame (the table frame at theta2 = 0)."""
+    c, s = np.cos(theta2), np.sin(theta2)
+    if points.ndim == 3:
+        c, s = c[:, None], s[:, None]
+    x, y = points[..., 0], points[..., 1]
+    return np.stack([c * x - s * y, s * x + c * y, points[..., 2]], -1)
+
+
+@dataclass(frozen=True)
+class Placed:
+    """The moving bodies of N joint sets. ``head``: the stack's cylinders in the table frame (N,
+    H, 2, 3) axis end points; ``links``: the rods and the platform as capsules in the base frame
+    (N, 5, 2, 3) (leg I's two rods, legs II and III, the platform); both also in the table frame
+    for the table-side checks, and the rotation (table to base) and origin of each table frame."""
+
+    head: np.ndarray  # (N, H, 2, 3) table frame
+    links: np.ndarray  # (N, 5, 2, 3) base frame
+    links_table: np.ndarray  # (N, 5, 2, 3) table frame
+    theta2: np.ndarray  # (N,) rad, true
+
+
+LINK_NAMES = ("leg I rod 1", "leg I rod 2", "leg II", "leg III", "platform")
+GUIDEWAY_NAMES = ("guideway I", "guideway II", "guideway III")
+
+
+def link_radii(bodies: BodiesConfig) -> np.ndarray:
+    """(5,) mm: the radii of :data:`LINK_NAMES`."""
+    r = bodies.rods
+    return np.array([0.5 * r.leg1_diameter, 0.5 * r.leg1_diameter, 0.5 * r.parallelogram_width,
+                     0.5 * r.parallelogram_width, 0.5 * bodies.platform.diameter])
+
+
+def guideways(bodies: BodiesConfig, geometry: Geometry) -> Capsules:
+    """The three guideways (base frame, mm) ``outboard`` of their sliders' joints (leg I's: of
+    the middle of its two rods), away from the machine's vertical axis."""
+    g, p = bodies.guideways, bodies.platform
+    d1, d2 = p.D1 - geometry.D1_minus_d1, p.D2 - geometry.D2_minus_d2
+    joint = np.array([[d1, 0.0], [d2, -geometry.r4], [d2, geometry.r4]])
+    xy = joint + g.outboard * joint / np.linalg.norm(joint, axis=1, keepdims=True)
+    return Capsules(np.column_stack([xy, np.full(3, g.top)]), np.column_stack([xy, np.full(3, g.bottom)]),
+                    np.full(3, 0.5 * g.diameter))
+
+
+def place(bodies: BodiesConfig, geometry: Geometry, joints: np.ndarray, platform: np.ndarray,
+          alpha: np.ndarray, delta: np.ndarray, stack_start: np.ndarray, stack_end: np.ndarray) -> Placed:
+    """The moving bodies at N joint sets: ``joints`` (N, 5) true joints (mm, rad), ``platform``
+    (N, 3) P in the base frame (mm), ``alpha`` (N,) rad, ``delta`` (N,) P to tool tip (mm),
+    ``stack_start``/``stack_end`` (N, H) the head bodies' spans from the tip (mm, :class:`Stack`;
+    rows of one H). ``geometry``: the kinematics' record."""
+    g, p = geometry, bodies.platform
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    ey = np.column_stack([np.zeros_like(ca), ca, sa])  # Rot(x, alpha) e_y, e_z
+    ez = np.column_stack([np.zeros_like(ca), -sa, ca])
+    ex = np.array([1.0, 0.0, 0.0])
+
+    def on_platform(x: float, y: float) -> np.ndarray:
+        return platform + x * ex + y * ey
+
+    d1, d2 = p.D1 - g.D1_minus_d1, p.D2 - g.D2_minus_d2
+    rho = joints[:, :3]
+    one = np.ones(len(joints))
+
+    def on_slider(x: float, y: float, k: int) -> np.ndarray:
+        return np.column_stack([x * one, y * one, rho[:, k]])
+
+    links = np.stack([
+        np.stack([on_slider(d1, g.r1, 0), on_platform(p.D1, g.R1)], 1),
+        np.stack([on_slider(d1, -g.r1, 0), on_platform(p.D1, -g.R1)], 1),
+        np.stack([on_slider(d2, -g.r4, 1), on_platform(p.D2, -g.R2)], 1),
+        np.stack([on_slider(d2, g.r4, 2), on_platform(p.D2, g.R2)], 1),
+        np.stack([on_platform(0.5 * (p.D1 + p.D2), -max(g.R1, g.R2)),
+                  on_platform(0.5 * (p.D1 + p.D2), max(g.R1, g.R2))], 1),
+    ], 1)
+    rotation = table_rotation(joints[:, 3], joints[:, 4])
+    origin = table_origin(g.da, g.dt, joints[:, 3])
+    tip_base = platform + delta[:, None] * ez
+    tip = to_table(tip_base, rotation, origin)
+    axis = -np.einsum("nji,nj->ni", rotation, ez)  # from the tip toward the spindle
+    head = tip[:, None, None] + np.stack([stack_start, stack_end], -1)[..., None] * axis[:, None, None]
+    links_table = to_table(links.reshape(len(joints), -1, 3), rotation, origin).reshape(links.shape)
+    return Placed(head, links, links_table, joints[:, 4])
+
+
+def head_cylinders(placed: Placed, radius: np.ndarray, rows: np.ndarray, body: np.ndarray,
+                   cradle: bool = False) -> Cylinders:
+    """The head bodies ``body`` of joint sets ``rows`` (table frame, or the cradle frame)."""
+    ends = placed.head[rows, body]
+    if cradle:
+        ends = to_cradle(ends, placed.theta2[rows])
+    return Cylinders(ends[:, 0], ends[:, 1], radius[rows, body])
+
+
+def link_capsules(placed: Placed, radii: np.ndarray, rows: np.ndarray, body: np.ndarray,
+                  frame: str = "base") -> Capsules:
+    """Links ``body`` of joint sets ``rows`` in the base, table or cradle frame."""
+    ends = placed.links[rows, body] if frame == "base" else placed.links_table[rows, body]
+    if frame == "cradle":
+        ends = to_cradle(ends, placed.theta2[rows])
+    return Capsules(ends[:, 0], ends[:, 1], radii[body])
+
+
+def fixed_boxes(lo: np.ndarray, hi: np.ndarray, count: int) -> Boxes:
+    return Boxes(np.broadcast_to(lo, (count, 3)), np.broadcast_to(hi, (count, 3)))
