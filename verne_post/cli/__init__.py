@@ -5,7 +5,7 @@ A thin layer: parse options, call the library, print. mm and degrees at this int
 Importing a command's module registers it on :func:`main`.
 """
 
-from . import batch, calibrate, check, kinematics, machine, place, post, toolpath, verify, workspace  # noqa: F401  (registers the commands)
+from . import batch, calibrate, check, kinematics, linuxcnc, machine, place, post, toolpath, verify, workspace  # noqa: F401  (registers the commands)
 from .main import main
 
 __all__ = ["main"]

@@ -14,7 +14,11 @@ import numpy as np
 from ..bodies.world import cutting, plain
 from ..checks.collision import tool_use_of_poses, world_of
 from ..machine import Machine
-from .scene3d import MAX_FRAMES, MAX_PATH_POINTS
+
+#: Frames and path points of a posted program's scene: the page of a 36,000-block job stays
+#: under a megabyte (tests/test_report_html.py).
+FRAMES = 600
+PATH_POINTS = 6000
 
 if TYPE_CHECKING:
     from ..pipeline import PostResult
@@ -40,8 +44,16 @@ def post_scene(machine: Machine, result: PostResult) -> dict | None:
     clearance = world.clearance(blocks.joints, stack, cutting(poses.setup, blocks.tip, result.rapid, radius))
     contacts = sorted(clearance.contacts, key=lambda c: c.clearance)[:500]
     keep = np.unique(np.array([c.block for c in contacts], dtype=int))
-    chosen = _frames(len(blocks.pose), keep, MAX_FRAMES)
+    chosen = _frames(len(blocks.pose), keep, FRAMES)
     placed = world.sampler()(blocks.joints[chosen], stack[chosen], None)
+    # a block end out of reach (a program with violations) has no bodies to draw
+    drawn = np.all([np.isfinite(v).all(axis=(1, 2)) for v in placed.bodies.values()], axis=0)
+    if not drawn.any():
+        return None
+    if not drawn.all():
+        chosen = chosen[drawn]
+        placed = world.sampler()(blocks.joints[chosen], stack[chosen], None)
+        contacts = [c for c in contacts if c.block in set(chosen.tolist())]
     ends = np.cumsum(np.nan_to_num(result.duration))  # s: when each block ends
     slots = world.slots
     moving = [{"name": name, "group": _GROUPS.get(name, "holder"), "kind": "cylinder",
@@ -71,7 +83,8 @@ def post_scene(machine: Machine, result: PostResult) -> dict | None:
                           "z0": body.lo[2], "z1": body.hi[2], "radius": body.radius})
     frame_of_block = np.clip(np.searchsorted(chosen, np.arange(len(blocks.pose))), 0, len(chosen) - 1)
     points = np.unique(np.concatenate([np.linspace(0, len(blocks.pose) - 1,
-                                                   min(len(blocks.pose), MAX_PATH_POINTS // 2)).astype(int), keep]))
+                                                   min(len(blocks.pose), PATH_POINTS)).astype(int), keep]))
+    points = points[np.isfinite(blocks.tip[points]).all(axis=1)]
     smallest = clearance.smallest
     findings = [{"severity": "collision" if c.clearance <= 0 else "near miss",
                  "bodies": [plain(c.moving), plain(c.other)], "clearance": float(c.clearance),
@@ -81,7 +94,7 @@ def post_scene(machine: Machine, result: PostResult) -> dict | None:
             "frames": {"t": ends[chosen].tolist(), "line": poses.line[blocks.pose[chosen]].tolist(),
                        "poses": np.hstack(pose_parts).tolist()},
             "path": {"xyz": blocks.tip[points].ravel().tolist(),
-                     "clearance": [None if v >= clearance.cap else float(v) for v in smallest[points]],
+                     "clearance": [None if not v < clearance.cap else float(v) for v in smallest[points]],
                      "rapid": result.rapid[points].tolist(), "frame": frame_of_block[points].tolist()},
-            "clearance": {"t": ends.tolist(), "mm": [None if v >= clearance.cap else float(v) for v in smallest]},
+            "clearance": {"t": ends.tolist(), "mm": [None if not v < clearance.cap else float(v) for v in smallest]},
             "findings": findings}

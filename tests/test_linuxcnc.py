@@ -1,0 +1,217 @@
+"""LinuxCNC in the loop: the exported configuration, and a short program run through LinuxCNC 2.9's
+own task, planner and servo loop (``verne-post simulate``), checked against the program's text and
+an independent model of the machine (tests/independent.py), not against verne-post's own figures.
+
+Needs Debian's linuxcnc-uspace (``scripts/test`` installs it); fails, saying so, where it is missing.
+"""
+
+from __future__ import annotations
+
+import configparser
+import importlib
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import verne_post as vp
+from tests.independent import platform_from_tool, rod_residuals
+from verne_post.api import forward_kinematics
+from verne_post.cli import main
+from verne_post.errors import InputError
+from verne_post.linuxcnc import export_config, simulate
+from verne_post.linuxcnc.simulate import SimulationResult, linuxcnc_available, path_deviation
+
+# the module: the package's name 'simulate' is the function
+simulate_module = importlib.import_module("verne_post.linuxcnc.simulate")
+TOOL_LENGTH = 100.0
+#: Time scale of the run: 5 is the fastest that gives the K = 1 motion (docs/linuxcnc.md).
+TIME_SCALE = 5.0
+
+
+
+def _needs_linuxcnc() -> None:
+    missing = linuxcnc_available()
+    assert missing is None, f"these tests run LinuxCNC: apt-get install -y linuxcnc-uspace ({missing})"
+
+_CL = f"""PARTNO/LCNC
+UNITS/MM
+TLDATA/MILL,10.0,0.0,{TOOL_LENGTH},0.0,0.0
+LOADTL/1
+FEDRAT/MMPM,2000.0
+RAPID
+GOTO/0.0,0.0,20.0,0.0,0.0,1.0
+GOTO/0.0,0.0,0.0,0.0,0.0,1.0
+GOTO/40.0,0.0,0.0,0.0,0.0,1.0
+GOTO/40.0,30.0,0.0,0.3,0.0,0.953939
+GOTO/0.0,30.0,0.0,0.0,0.0,1.0
+GOTO/0.0,30.0,20.0,0.0,0.0,1.0
+"""
+
+_MOVE = re.compile(r"^(?:N\d+\s+)?G[01]\s+X(\S+)\s+Y(\S+)\s+Z(\S+)\s+A(\S+)\s+C(\S+)")
+
+
+def _limits(machine: vp.Machine) -> tuple[np.ndarray, np.ndarray]:
+    """Travel in mm and rad, read from the machine's fields here (not verne_post.api)."""
+    names = ("rho1", "rho2", "rho3", "theta1", "theta2")
+    low, high = [], []
+    for k, name in enumerate(names):
+        joint = getattr(machine.joints, name)
+        scale = 1.0 if k < 3 else np.pi / 180
+        low.append(-np.inf if joint.continuous else joint.min * scale)
+        high.append(np.inf if joint.continuous else joint.max * scale)
+    return np.array(low), np.array(high)
+
+
+@pytest.fixture(scope="module")
+def posted(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("linuxcnc")
+    (folder / "short.cls").write_text(_CL)
+    program = folder / "short.nc"
+    result = CliRunner().invoke(main, ["post", str(folder / "short.cls"), "-o", str(program), "-q",
+                                       "--work-offset", "0", "0", "200"])
+    assert result.exit_code == 0, result.output
+    return program
+
+
+@pytest.fixture(scope="module")
+def run(posted: Path) -> SimulationResult:
+    _needs_linuxcnc()
+    return simulate(posted, vp.load_machine(), time_scale=TIME_SCALE)
+
+
+def _blocks(program: Path) -> np.ndarray:
+    """Every move's end (X Y Z mm, A C deg) from the program's text."""
+    ends = [[float(v) for v in m.groups()] for line in program.read_text().splitlines() if (m := _MOVE.match(line))]
+    assert len(ends) > 5
+    return np.array(ends)
+
+
+def test_export_is_the_machine_in_joint_space(tmp_path: Path, machine: vp.Machine) -> None:
+    ini_path = export_config(machine, tmp_path / "cfg", home=(100, 47, 46, 0, 0))
+    ini = configparser.ConfigParser(inline_comment_prefixes=None, interpolation=None)
+    ini.optionxform = str  # LinuxCNC's keys are upper case
+    ini.read(ini_path)
+    assert ini["KINS"]["KINEMATICS"] == "trivkins coordinates=XYZAC"
+    assert ini["KINS"]["JOINTS"] == "5"
+    for k, name in enumerate(("rho1", "rho2", "rho3", "theta1", "theta2")):
+        section, joint = ini[f"JOINT_{k}"], getattr(machine.joints, name)
+        assert float(section["MAX_VELOCITY"]) == pytest.approx(joint.velocity)  # mm/s, deg/s
+        assert float(section["MAX_ACCELERATION"]) == pytest.approx(joint.acceleration)
+        assert section["HOME_SEARCH_VEL"] == "0"
+        if not joint.continuous:
+            assert (float(section["MIN_LIMIT"]), float(section["MAX_LIMIT"])) == (joint.min, joint.max)
+    assert float(ini["JOINT_0"]["HOME"]) == 100.0 and ini["JOINT_3"]["TYPE"] == "ANGULAR"
+    hal = (tmp_path / "cfg" / "verne.hal").read_text()
+    assert all(f"joint.{k}.motor-pos-cmd => joint.{k}.motor-pos-fb" in hal for k in range(5))
+    # time scale K: velocities x K, accelerations x K^2, servo period / K
+    fast = configparser.ConfigParser(interpolation=None)
+    fast.optionxform = str
+    fast.read(export_config(machine, tmp_path / "fast", time_scale=4.0))
+    assert float(fast["JOINT_1"]["MAX_VELOCITY"]) == pytest.approx(4 * machine.joints.rho2.velocity)
+    assert float(fast["JOINT_4"]["MAX_ACCELERATION"]) == pytest.approx(16 * machine.joints.theta2.acceleration)
+    assert int(fast["EMCMOT"]["SERVO_PERIOD"]) == 250_000
+
+
+def test_export_command(tmp_path: Path) -> None:
+    result = CliRunner().invoke(main, ["machine", "export", "linuxcnc", "-o", str(tmp_path / "c")])
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in (tmp_path / "c").iterdir()} >= {"verne.ini", "verne.hal", "verne.tbl"}
+
+
+def test_without_linuxcnc_one_line_naming_the_package(posted: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(simulate_module, "PROGRAMS", ("verne-post-no-such-linuxcnc-program",))
+    with pytest.raises(InputError, match="linuxcnc-uspace"):
+        simulate(posted, vp.load_machine())
+    result = CliRunner().invoke(main, ["simulate", str(posted)])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "linuxcnc-uspace" in lines[0] and "Traceback" not in result.output
+
+
+def test_the_run_stays_in_travel_and_ends_at_the_last_block(run: SimulationResult,
+                                                            posted: Path, machine: vp.Machine) -> None:
+    low, high = _limits(machine)
+    assert run.joints.shape == (len(run.t), 5) and len(run.t) > 100
+    assert np.all(run.joints >= low) and np.all(run.joints <= high)
+    last = _blocks(posted)[-1]
+    final = np.r_[run.joints[-1, :3], np.degrees(run.joints[-1, 3:])]
+    np.testing.assert_allclose(final, last, atol=1e-3)
+    # one servo period (1 ms at time scale 1) between samples, whatever the time scale
+    np.testing.assert_allclose(np.diff(run.t), 1e-3, atol=1e-12)
+
+
+def test_cycle_time_against_the_header(run: SimulationResult, posted: Path) -> None:
+    header = float(re.search(r"\(CYCLE TIME (\d+\.\d+) S", posted.read_text()).group(1))
+    moving = np.flatnonzero(np.any(np.diff(run.joints, axis=0) != 0, axis=1))
+    assert run.cycle_time == pytest.approx((moving[-1] - moving[0] + 1) * 1e-3, abs=2e-3)
+    # LinuxCNC 2.9's planner has no jerk limit but blends and cannot reach the plan's speed in short blocks
+    assert run.cycle_time > 0 and 0.7 * header < run.cycle_time < 2.0 * header, (run.cycle_time, header)
+
+
+def test_every_block_end_is_passed_in_order_within_the_blend(run: SimulationResult, posted: Path,
+                                                            machine: vp.Machine) -> None:
+    """LinuxCNC's default G64 blends corners: each block end is passed near, not through. Walking
+    the samples forward, each block end's tip is met in turn; how near is measured here and must
+    stay within the program's rapid tolerance (in the joints, a rotary corner is cut by degrees
+    where the tip hardly moves: the tip is what is bounded)."""
+    ends = _blocks(posted)
+    ends[:, 3:] = np.radians(ends[:, 3:])
+    end_tips = forward_kinematics(machine, ends, tool_length=TOOL_LENGTH).tip
+    tips = forward_kinematics(machine, run.joints, tool_length=TOOL_LENGTH).tip
+    rapid_tol = float(re.search(r"RAPIDS (\d+\.?\d*) MM", posted.read_text()).group(1))
+    start, gaps = 0, []
+    for tip in end_tips:
+        distance = np.linalg.norm(tips[start:] - tip, axis=1)
+        # the first sample after ``start`` that comes within the tolerance, then the closest one near it
+        within = np.flatnonzero(distance < rapid_tol)
+        assert len(within), f"block end {tip} never reached after sample {start}"
+        first = int(within[0])
+        run_end = first + int(np.argmax(distance[first:] >= rapid_tol)) if np.any(distance[first:] >= rapid_tol) \
+            else len(distance)
+        closest = first + int(np.argmin(distance[first:run_end]))
+        gaps.append(float(distance[closest]))
+        start += closest
+    assert max(gaps) < rapid_tol
+    assert start >= len(tips) - 2  # the last block end is where the samples end
+
+
+def test_tip_deviation_against_an_independent_model(run: SimulationResult, posted: Path,
+                                                    machine: vp.Machine) -> None:
+    """The samples' tips (verified by the independent model's rod lengths) against the program's
+    block lines, by brute force here, agree with path_deviation's figures."""
+    geometry = machine.kinematic_geometry(TOOL_LENGTH)
+    fk = forward_kinematics(machine, run.joints, tool_length=TOOL_LENGTH)
+    assert np.all(fk.reachable)
+    platform, alpha = platform_from_tool(geometry, fk.tip, fk.axis, run.joints[:, 3], run.joints[:, 4])
+    residual = rod_residuals(geometry, platform, alpha, run.joints[:, :3])
+    assert np.abs(residual).max() < 1e-6 * geometry.L1**2
+    ends = _blocks(posted)
+    ends[:, 3:] = np.radians(ends[:, 3:])
+    s = np.linspace(0.0, 1.0, 201)[:, None, None]
+    dense = (ends[:-1] + s * (ends[1:] - ends[:-1])).transpose(1, 0, 2).reshape(-1, 5)
+    line_tips = forward_kinematics(machine, dense, tool_length=TOOL_LENGTH).tip
+    a, ab = line_tips[:-1], np.diff(line_tips, axis=0)
+    length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+
+    def to_path(tip: np.ndarray) -> float:
+        u = np.clip(np.einsum("ij,ij->i", tip - a, ab) / length2, 0.0, 1.0)
+        return float(np.min(np.linalg.norm(a + u[:, None] * ab - tip, axis=1)))
+
+    nearest = np.array([to_path(tip) for tip in fk.tip[::3]])
+    measured = path_deviation(machine, posted.read_text(), run)
+    worst = max(measured.feeds, measured.between_cuts)
+    assert nearest.max() == pytest.approx(worst, abs=0.01 + 0.2 * worst)
+    assert worst < float(re.search(r"RAPIDS (\d+\.?\d*) MM", posted.read_text()).group(1))
+
+
+def test_simulate_command(posted: Path, tmp_path: Path) -> None:
+    report = tmp_path / "r.json"
+    result = CliRunner().invoke(main, ["simulate", str(posted), "--time-scale", "5", "--report", str(report)])
+    assert result.exit_code == 0, result.output
+    assert "cycle time: executed" in result.output and "header" in result.output
+    payload = json.loads(report.read_text())
+    assert payload["cycle_time_s"]["executed"] > 0 and payload["joints_within_travel"] is True
