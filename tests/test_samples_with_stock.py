@@ -22,12 +22,12 @@ from verne_post.cli import main
 SAMPLES = Path(__file__).parent / "data" / "cl-samples"
 # The stock: "box", the feed points' box, 10 mm deeper (a face cut's points lie in a plane: the
 # stock is below them). Where the head itself goes down into the room the CAM has cleared (swarf
-# walls 3.5 in deep, a thread mill 4 in down its hole, a variable-axis pocket) a solid box there
-# would be met by the holder: material a box cannot know has gone (the in-process stock). There
+# walls 3.5 in deep, a thread mill 4 in down its hole, Z-levels down around a core) a solid box
+# there would be met by the holder: material a box cannot know has gone (the in-process stock). There
 # the stock is "floor": the same box's footprint, 10 mm thick, under the deepest feed point.
 # Not here: nx_swarf and nx_variable_axis, whose tilted 100 mm tools put the spindle's rim below
 # the deepest tip, into any floor under the walls (a longer tool is what a shop would give them).
-POSTED = [("nx_zlevel_coremill_mm.cls", "box"), ("creo8_schruppen_roughing_mm.ncl", "box"),
+POSTED = [("nx_zlevel_coremill_mm.cls", "floor"), ("creo8_schruppen_roughing_mm.ncl", "box"),
           ("creo8_profilfraesen_mm.ncl", "box"), ("makino_ffcam_plane1_mm.cldata", "box"),
           ("creo_v19_thread_mill_helical_inch.ncl", "floor")]
 TOOL_LENGTH = 100.0
