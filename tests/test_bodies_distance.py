@@ -164,3 +164,27 @@ def test_the_head_bodies_sit_on_the_tool_axis_from_the_tip(machine: vp.Machine) 
     # the rods between their joint centres: each as long as its leg's rods (the paper's L1, L2, L3)
     lengths = np.linalg.norm(placed.links[:, :4, 1] - placed.links[:, :4, 0], axis=2)
     assert np.allclose(lengths, [g.L1, g.L1, g.L2, g.L3], atol=1e-6)
+
+
+def test_capsules_shrunk_to_points_and_parallel_ones_against_brute_force() -> None:
+    """The closed-form capsule distance where its formula divides by little: a capsule that is a
+    sphere (a zero-length axis) on either side, and parallel axes."""
+    rng = np.random.default_rng(17)
+    n = 300
+    p0, q0 = rng.uniform(-50, 50, (n, 3)), rng.uniform(-50, 50, (n, 3))
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    length = rng.uniform(0.0, 60.0, (n, 1))
+    cases = [(p0, p0, q0, q0 + direction * length), (p0, p0 + direction * length, q0, q0),
+             (p0, p0 + direction * length, q0, q0 + direction * rng.uniform(1.0, 60.0, (n, 1)))]
+    s = np.linspace(0.0, 1.0, 2001)
+    for a0, a1, b0, b1 in cases:
+        ra, rb = rng.uniform(0.5, 10.0, n), rng.uniform(0.5, 10.0, n)
+        found = distance(Capsules(a0, a1, ra), Capsules(b0, b1, rb))
+        for k in range(0, n, 10):
+            pts = a0[k] + s[:, None] * (a1[k] - a0[k])
+            axis = (np.linalg.norm(pts - b0[k], axis=1) if np.array_equal(b0[k], b1[k])
+                    else _to_segment(pts, b0[k], b1[k]))
+            truth = max(float(axis.min()) - ra[k] - rb[k], 0.0)
+            spacing = float(np.linalg.norm(a1[k] - a0[k])) / 2000
+            assert truth - spacing - 1e-9 <= found[k] <= truth + 1e-9, (k, found[k], truth)

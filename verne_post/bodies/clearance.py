@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .convex import Boxes, Capsules, Convex, Cylinders, distance, rows
+from .convex import Boxes, Capsules, Convex, Cylinders, distance, quick_bound, rows
 
 #: The path of a body point between two samples is at most this many times the chord.
 KAPPA = 1.25
@@ -82,17 +82,21 @@ def _body(kind: type, ends: np.ndarray, radius: np.ndarray) -> Convex:
     return kind(ends[:, 0], ends[:, 1], radius)
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of v (..., 3)."""
+    return np.sqrt(np.einsum("...i,...i->...", v, v))
+
+
 def _motion(ends_a: np.ndarray, ends_b: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """mm: the bound of how far a point of the body moves between two placements (see module)."""
-    shift = np.maximum(np.linalg.norm(ends_b[:, 0] - ends_a[:, 0], axis=1),
-                       np.linalg.norm(ends_b[:, 1] - ends_a[:, 1], axis=1))
+    shift = np.maximum(_norm(ends_b[:, 0] - ends_a[:, 0]), _norm(ends_b[:, 1] - ends_a[:, 1]))
 
     def direction(ends: np.ndarray) -> np.ndarray:
         span = ends[:, 1] - ends[:, 0]
-        size = np.linalg.norm(span, axis=1, keepdims=True)
+        size = _norm(span)[:, None]
         return span / np.where(size > 0, size, 1.0)
 
-    turn = np.linalg.norm(direction(ends_b) - direction(ends_a), axis=1)
+    turn = _norm(direction(ends_b) - direction(ends_a))
     return KAPPA * (shift + radius * 1.1 * turn)
 
 
@@ -112,25 +116,32 @@ def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np
     contacts: list[Contact] = []
     left, right = np.arange(m - 1), np.arange(1, m)
     usable = known[:-1] & known[1:]
+    shapes: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def shape(name: str, kind: type) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A moving body's centres, bounding radii and motion bound per block (each body once)."""
+        if name not in shapes:
+            body_ends, r = ends.bodies[name], ends.radius[name]
+            half = 0.5 * _norm(body_ends[:, 1] - body_ends[:, 0])
+            reach = half + r if kind is Capsules else np.hypot(half, r)
+            shapes[name] = (0.5 * (body_ends[:, 0] + body_ends[:, 1]), reach,
+                            _motion(body_ends[:-1], body_ends[1:], np.maximum(r[:-1], r[1:])))
+        return shapes[name]
+
     for pair in pairs:
-        a_ends, a_r = ends.bodies[pair.moving], ends.radius[pair.moving]
+        centre_a, reach_a, move = shape(pair.moving, pair.kind)
         if pair.fixed is not None:
             reach_b = pair.fixed.reach()[0]
             centre_b = pair.fixed.centre()[0]
-            b_move = np.zeros(m - 1)
         else:
-            b_ends, b_r = ends.bodies[pair.other], ends.radius[pair.other]
-            centre_b = 0.5 * (b_ends[:, 0] + b_ends[:, 1])
-            reach_b = 0.5 * np.linalg.norm(b_ends[:, 1] - b_ends[:, 0], axis=1) + b_r
-            b_move = _motion(b_ends[:-1], b_ends[1:], np.maximum(b_r[:-1], b_r[1:]))
-        centre_a = 0.5 * (a_ends[:, 0] + a_ends[:, 1])
-        reach_a = (0.5 * np.linalg.norm(a_ends[:, 1] - a_ends[:, 0], axis=1) if pair.kind is Capsules
-                   else np.hypot(0.5 * np.linalg.norm(a_ends[:, 1] - a_ends[:, 0], axis=1), a_r))
-        if pair.kind is Capsules:
-            reach_a = reach_a + a_r
-        sphere = np.maximum(np.linalg.norm(centre_a - centre_b, axis=1) - reach_a - reach_b, 0.0)
+            centre_b, reach_b, b_move = shape(pair.other, Capsules)
+            move = move + b_move
+        sphere = np.maximum(_norm(centre_a - centre_b) - reach_a - reach_b, 0.0)
+        # the slabs about the centres' direction and the bodies' faces: most pairs settle here
+        rows_ = np.flatnonzero(known & (sphere < margin + 1.0))
+        if rows_.size:
+            sphere[rows_] = np.maximum(sphere[rows_], quick_bound(*_pair_bodies(pair, ends, rows_)))
         sphere = np.where(known, sphere, np.inf)
-        move = _motion(a_ends[:-1], a_ends[1:], np.maximum(a_r[:-1], a_r[1:])) + b_move
         active = np.ones(m, bool) if pair.active is None else pair.active
         # block k (ends k-1 -> k) is checked where the pair is active on it; block 0 at its end
         check_end = known & active
@@ -146,8 +157,10 @@ def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np
         exact = sphere.copy()
         exact[need] = _distance(pair, ends, need, margin)
         lb = np.where(usable & active[1:], 0.5 * (exact[:-1] + exact[1:] - move), np.inf)
-        np.minimum(smallest[1:], np.where(active[1:], np.minimum(np.maximum(lb, 0.0), exact[1:]), cap),
-                   out=smallest[1:])
+        # a block whose bound clears the margin has at least that bound; the others get their
+        # ends' clearances here and the bisection's least bound below
+        value = np.where(lb >= margin, np.minimum(lb, exact[1:]), exact[1:])
+        np.minimum(smallest[1:], np.where(active[1:], value, cap), out=smallest[1:])
         if at0 and exact[0] < margin:
             smallest[0] = min(smallest[0], exact[0])
             contacts.append(Contact(0, 1.0, pair.moving, pair.other, float(exact[0])))
@@ -159,13 +172,17 @@ def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np
     return ClearanceResult(tuple(contacts), smallest, cap)
 
 
-def _distance(pair: Pair, ends: Samples, index: np.ndarray, need: float) -> np.ndarray:
+def _pair_bodies(pair: Pair, ends: Samples, index: np.ndarray) -> tuple[Convex, Convex]:
     a = _body(pair.kind, ends.bodies[pair.moving][index], ends.radius[pair.moving][index])
     if pair.fixed is None:
         b = _body(Capsules, ends.bodies[pair.other][index], ends.radius[pair.other][index])
     else:
         b = rows(pair.fixed, np.zeros(len(index), int))
-    return distance(a, b, need + 1.0)
+    return a, b
+
+
+def _distance(pair: Pair, ends: Samples, index: np.ndarray, need: float) -> np.ndarray:
+    return distance(*_pair_bodies(pair, ends, index), need + 1.0)
 
 
 def _bisect(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np.ndarray], Samples], tool: np.ndarray,

@@ -16,6 +16,7 @@ further. Units: mm, in whatever frame both bodies are given.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -30,8 +31,13 @@ GAP = 1e-3
 SETTLED = 0.02
 
 
+def _norm(v: np.ndarray) -> np.ndarray:
+    """Euclidean norms of the rows of v (N, 3)."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = _norm(v)[:, None]
     return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
 
 
@@ -52,13 +58,13 @@ class Capsules:
     def project(self, x: np.ndarray) -> np.ndarray:
         q = self._axis(x)
         off = x - q
-        size = np.linalg.norm(off, axis=1)
+        size = _norm(off)
         scale = np.minimum(1.0, self.radius / np.where(size > 0, size, 1.0))
         return q + off * scale[:, None]
 
     def support(self, d: np.ndarray) -> np.ndarray:
         return (np.maximum(np.einsum("ij,ij->i", self.p0, d), np.einsum("ij,ij->i", self.p1, d))
-                + self.radius * np.linalg.norm(d, axis=1))
+                + self.radius * _norm(d))
 
     def support_point(self, d: np.ndarray, near: np.ndarray) -> np.ndarray:
         """A point of each body where ``d`` . x is largest (``near`` breaks ties)."""
@@ -87,40 +93,47 @@ class Cylinders:
     c1: np.ndarray  # (N, 3)
     radius: np.ndarray  # (N,)
 
+    @cached_property
+    def _axis(self) -> np.ndarray:
+        """(N, 3) unit axes (0 for a flat one)."""
+        return _unit(self.c1 - self.c0)
+
+    @cached_property
+    def _length(self) -> np.ndarray:
+        return _norm(self.c1 - self.c0)
+
     def project(self, x: np.ndarray) -> np.ndarray:
-        span = self.c1 - self.c0
-        size = np.linalg.norm(span, axis=1)
-        a = span / np.where(size > 0, size, 1.0)[:, None]
+        size, a = self._length, self._axis
         rel = x - self.c0
         along = np.einsum("ij,ij->i", rel, a)
         radial = rel - along[:, None] * a
-        r = np.linalg.norm(radial, axis=1)
+        r = _norm(radial)
         scale = np.minimum(1.0, self.radius / np.where(r > 0, r, 1.0))
         return self.c0 + np.clip(along, 0.0, size)[:, None] * a + radial * scale[:, None]
 
     def support(self, d: np.ndarray) -> np.ndarray:
-        a = _unit(self.c1 - self.c0)
+        a = self._axis
         along = np.einsum("ij,ij->i", d, a)
-        perp = np.linalg.norm(d - along[:, None] * a, axis=1)
+        perp = _norm(d - along[:, None] * a)
         return (np.maximum(np.einsum("ij,ij->i", self.c0, d), np.einsum("ij,ij->i", self.c1, d))
                 + self.radius * perp)
 
     def support_point(self, d: np.ndarray, near: np.ndarray) -> np.ndarray:
-        a = _unit(self.c1 - self.c0)
+        a = self._axis
         along = np.einsum("ij,ij->i", d, a)
         end = np.where((along > 0)[:, None], self.c1, self.c0)
         radial = d - along[:, None] * a
         # d along the axis: the whole end face; its point nearest to ``near``
-        flat = np.linalg.norm(radial, axis=1) <= 1e-9 * np.linalg.norm(d, axis=1)
+        flat = _norm(radial) <= 1e-9 * _norm(d)
         rel = near - end
         rel = rel - np.einsum("ij,ij->i", rel, a)[:, None] * a
-        size = np.linalg.norm(rel, axis=1)
+        size = _norm(rel)
         toward = rel * np.minimum(1.0, self.radius / np.where(size > 0, size, 1.0))[:, None]
         return end + np.where(flat[:, None], toward, self.radius[:, None] * _unit(radial))
 
     def normals(self, d: np.ndarray) -> tuple[np.ndarray, ...]:
         """The end face's normal and the side's, nearest to ``d``."""
-        a = _unit(self.c1 - self.c0)
+        a = self._axis
         along = np.einsum("ij,ij->i", d, a)
         return np.where((along >= 0)[:, None], a, -a), _unit(d - along[:, None] * a)
 
@@ -175,6 +188,44 @@ def lower_bound(a: Convex, b: Convex, n: np.ndarray) -> np.ndarray:
     return -a.support(-n) - b.support(n)
 
 
+def best_slab(a: Convex, b: Convex, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """mm, (N,) and (N, 3): the widest separating slab among the unit direction ``n`` (from B to
+    A) and the bodies' face normals nearest to it: a lower bound of the distance, and its normal."""
+    slabs = np.stack([n, *b.normals(n), *(-m for m in a.normals(-n))], axis=1)  # (N, S, 3)
+    widths = np.stack([lower_bound(a, b, slabs[:, s]) for s in range(slabs.shape[1])], axis=1)
+    best = np.argmax(widths, axis=1)
+    rows_ = np.arange(len(best))
+    return widths[rows_, best], slabs[rows_, best]
+
+
+def capsule_distance(a: Capsules, b: Capsules) -> np.ndarray:
+    """mm, (N,): the distance of two capsules in closed form (0 where they meet): their axes'
+    closest points, clamped to the segments (Ericson, Real-Time Collision Detection, 5.1.9),
+    less both radii."""
+    d1, d2, r = a.p1 - a.p0, b.p1 - b.p0, a.p0 - b.p0
+    aa, ee = np.einsum("ij,ij->i", d1, d1), np.einsum("ij,ij->i", d2, d2)
+    bb, cc, ff = np.einsum("ij,ij->i", d1, d2), np.einsum("ij,ij->i", d1, r), np.einsum("ij,ij->i", d2, r)
+    tiny = 1e-12
+    safe_a, safe_e = np.where(aa > tiny, aa, 1.0), np.where(ee > tiny, ee, 1.0)
+    denom = aa * ee - bb * bb
+    s = np.where(denom > tiny * np.maximum(aa * ee, 1.0), np.clip((bb * ff - cc * ee) / np.where(denom > 0, denom, 1.0),
+                                                               0.0, 1.0), 0.0)
+    s = np.where(aa > tiny, s, 0.0)
+    t = np.where(ee > tiny, (bb * s + ff) / safe_e, 0.0)
+    # t outside the second segment: clamp it and recompute s for it
+    t_clamped = np.clip(t, 0.0, 1.0)
+    again = (t != t_clamped) | (ee <= tiny)  # the second segment a point: s for its one point too
+    s = np.where(again, np.where(aa > tiny, np.clip((bb * t_clamped - cc) / safe_a, 0.0, 1.0), 0.0), s)
+    gap = (a.p0 + s[:, None] * d1) - (b.p0 + t_clamped[:, None] * d2)
+    return np.maximum(_norm(gap) - a.radius - b.radius, 0.0)
+
+
+def quick_bound(a: Convex, b: Convex) -> np.ndarray:
+    """mm, (N,): a cheap lower bound of each pair's distance (no iteration): the best slab about
+    the direction between the bodies' centres (never less than their bounding spheres' gap)."""
+    return np.maximum(best_slab(a, b, _unit(a.centre() - b.centre()))[0], 0.0)
+
+
 def distance(a: Convex, b: Convex, need: np.ndarray | float = np.inf) -> np.ndarray:
     """mm, (N,): a certified lower bound of the distance between bodies a[i] and b[i], 0 where they
     meet. Pairs are iterated until the bound is within :data:`SETTLED` of the best pair found
@@ -185,7 +236,10 @@ def distance(a: Convex, b: Convex, need: np.ndarray | float = np.inf) -> np.ndar
     Alternating projections crawl where two faces are nearly parallel (a cutter's end a degree
     off a face: thousands of steps). So each round also tries the bodies' face normals nearest
     to the iterate's direction as slabs, and restarts from A's point furthest along the best
-    slab where that pair is closer: a tilted end face's rim point, which is the closest one."""
+    slab where that pair is closer: a tilted end face's rim point, which is the closest one. Two
+    capsules need none of it: their distance is closed-form (:func:`capsule_distance`)."""
+    if isinstance(a, Capsules) and isinstance(b, Capsules):
+        return capsule_distance(a, b)
     count = len(a.centre())
     need = np.broadcast_to(np.asarray(need, dtype=float), (count,))
     x = a.project(b.project(a.centre()))
@@ -201,15 +255,10 @@ def distance(a: Convex, b: Convex, need: np.ndarray | float = np.inf) -> np.ndar
         done += FIRST_ITERATIONS if done == 0 else 2 * FIRST_ITERATIONS
         y = bb.project(xo)
         gap = xo - y
-        upper = np.linalg.norm(gap, axis=1)
-        n = _unit(gap)
-        slabs = np.stack([n, *bb.normals(n), *(-m for m in aa.normals(-n))], axis=1)  # (K, S, 3)
-        widths = np.stack([lower_bound(aa, bb, slabs[:, s]) for s in range(slabs.shape[1])], axis=1)
-        best = np.argmax(widths, axis=1)
-        low = widths[np.arange(len(best)), best]
-        slab = slabs[np.arange(len(best)), best]
+        upper = _norm(gap)
+        low, slab = best_slab(aa, bb, _unit(gap))
         jump = aa.support_point(-slab, xo)
-        jumped = np.linalg.norm(jump - bb.project(jump), axis=1)
+        jumped = _norm(jump - bb.project(jump))
         closer = jumped < upper
         xo = np.where(closer[:, None], jump, xo)
         upper = np.minimum(upper, jumped)
