@@ -580,7 +580,8 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
     tools = {t.number: (t.length, t.delta) for t in poses.tools}
     if blocks is None:
         return Program(np.zeros((0, 5)), np.zeros(0, bool), np.zeros(0), np.zeros(0, np.int64),
-                       part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses))
+                       part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses),
+                       tolerance=options.tol)
     positioning = _positioning(len(blocks.pose), True)
     return Program(joints=blocks.joints, rapid=positioning, duration=duration, line=poses.line[blocks.pose],
                    events=events, part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses),

@@ -164,7 +164,12 @@ class Controller:
         return f"({text})" if self.comment == "parentheses" else f"; {text}"
 
 
-LINUXCNC = Controller("linuxcnc")
+# LinuxCNC 2.9's default G64 blends corners with no tolerance: a blend may take half a block
+# (measured: the tip 1.2-2.8 mm off the moves between cuts). G64 P bounds the blend's deviation in
+# the X Y Z words (here the sliders; A and C are blended unbounded); Q0 turns off the naive-CAM
+# merging of collinear blocks, which merges only blocks whose A and C do not move (src/emc/rs274ngc
+# interp_convert.cc convert_control_mode; src/emc/task/emccanon.cc SET_MOTION_CONTROL_MODE).
+LINUXCNC = Controller("linuxcnc", program_start=("G21 G90 G17 G40 G49 G94", "G64 P{tolerance:.4f} Q0"))
 
 DIALECTS: Mapping[str, Controller] = {
     "linuxcnc": LINUXCNC,
@@ -194,9 +199,10 @@ DIALECTS: Mapping[str, Controller] = {
 #: The placeholders each list of lines may use, and what they stand for: ``{tool}`` the tool
 #: number, ``{length}`` its gauge length (mm), ``{delta}`` the platform centre to its tip (mm,
 #: the paper's Delta), ``{spindle}`` its spindle speed (rpm: ``output.gcode.tool_spindles``),
-#: ``{name}`` the part's name, ``{program}`` the program number.
+#: ``{name}`` the part's name, ``{program}`` the program number, ``{tolerance}`` the tip tolerance
+#: the blocks were made to (mm, the post's --tol).
 PLACEHOLDERS: Mapping[str, frozenset[str]] = {
-    "program_start": frozenset({"name", "program"}),
+    "program_start": frozenset({"name", "program", "tolerance"}),
     "program_end": frozenset({"name", "program"}),
     "tool_change": frozenset({"tool", "length", "delta", "spindle", "name", "program"}),
     "program_number_line": frozenset({"program"}),
@@ -204,7 +210,8 @@ PLACEHOLDERS: Mapping[str, frozenset[str]] = {
 
 #: Values the placeholders are tried with when a machine file is read: a format that fails on
 #: them (``{name:d}``) fails on every program.
-SAMPLES = {"tool": 1, "length": 100.0, "delta": 100.0, "spindle": 10000.0, "name": "PART", "program": 1}
+SAMPLES = {"tool": 1, "length": 100.0, "delta": 100.0, "spindle": 10000.0, "name": "PART", "program": 1,
+           "tolerance": 0.005}
 
 
 def placeholders(template: str) -> set[str]:

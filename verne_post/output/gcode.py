@@ -154,6 +154,8 @@ class Program:
     - ``tool_spindle``: CL line of a tool change -> the spindle speed (rpm) of that tool, the
       ``{spindle}`` of the controller's tool-change lines (:func:`tool_spindles`).
     - ``name``: ``{name}`` in the controller's lines (default: ``part_name``, else empty).
+    - ``tolerance``: ``{tolerance}`` in the controller's lines, mm: the tip tolerance the blocks
+      were made to (LinuxCNC's blending tolerance, ``G64 P``).
     """
 
     joints: np.ndarray
@@ -167,6 +169,7 @@ class Program:
     between: np.ndarray | None = None
     tool_spindle: dict[int, float] | None = None
     name: str | None = None
+    tolerance: float = 0.005
 
 
 #: The comment that ends a G1 block of a move between cuts: the controller runs it as written
@@ -452,7 +455,8 @@ class GcodeWriter:
         self.body_lines = 0  # lines of the body so far
         self.position: np.ndarray | None = None  # the last block's end (mm, degrees)
         self.in_force: dict[type, str] = {}  # the last spindle and coolant lines
-        self.values: dict[str, object] = {"name": "", "program": self.fmt.controller.program_number}
+        self.values: dict[str, object] = {"name": "", "program": self.fmt.controller.program_number,
+                                          "tolerance": 0.005}
 
     def _number(self, k: np.ndarray | int) -> np.ndarray | int:
         """The N number of the k-th numbered line (1-based), wrapped to ``start`` beyond the
@@ -481,7 +485,8 @@ class GcodeWriter:
         the profile's start lines."""
         controller = self.fmt.controller
         name = program.name if program.name is not None else program.part_name or ""
-        self.values = {"name": comment_text(name), "program": controller.program_number}
+        self.values = {"name": comment_text(name), "program": controller.program_number,
+                       "tolerance": program.tolerance}
         head: list[tuple[str, bool]] = [("%", False)] if controller.percent else []
         if controller.program_number_line is not None and controller.program_number is not None:
             head.append((render(controller.program_number_line, self.values), False))
