@@ -215,3 +215,22 @@ def test_simulate_command(posted: Path, tmp_path: Path) -> None:
     assert "cycle time: executed" in result.output and "header" in result.output
     payload = json.loads(report.read_text())
     assert payload["cycle_time_s"]["executed"] > 0 and payload["joints_within_travel"] is True
+
+
+def test_without_an_ipc_namespace_nothing_of_linuxcnc_is_left(posted: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Where the driver may not have a System V IPC namespace of its own (a container without
+    CAP_SYS_ADMIN), it removes LinuxCNC's shared memory and semaphores by key: none is left
+    (keys from LinuxCNC's own NML file and emcmotcfg.h, read by ``ipcs`` here)."""
+    import subprocess
+
+    _needs_linuxcnc()
+    monkeypatch.setattr(simulate_module, "_DRIVER",
+                        simulate_module._DRIVER.replace("LIBC.unshare(0x08000000) == 0", "False"))
+    result = simulate(posted, vp.load_machine(), time_scale=TIME_SCALE)
+    assert result.cycle_time > 0
+    nml = Path("/usr/share/linuxcnc/linuxcnc.nml").read_text().splitlines()
+    keys = {int(f[9]) for f in (line.split() for line in nml) if len(f) > 9 and f[0] == "B" and f[2] == "SHMEM"}
+    keys |= {0x48414C32, 0x90280A48, 0x48484C34, 100}
+    listed = subprocess.run(["ipcs", "-m", "-s"], capture_output=True, text=True, check=True).stdout
+    left = {int(word, 16) for word in re.findall(r"^(0x[0-9a-f]+)\s", listed, re.M)}
+    assert not keys & left, sorted(keys & left)

@@ -276,7 +276,8 @@ LIBC.prctl(36, 1, 0, 0, 0)  # PR_SET_CHILD_SUBREAPER: every orphan of LinuxCNC b
 NAMESPACED = LIBC.unshare(0x08000000) == 0  # CLONE_NEWIPC: shared memory and semaphores of our own
 ME = os.getpid()
 NML = "/usr/share/linuxcnc/linuxcnc.nml"
-HAL_KEYS = (0x48414C32, 0x90280A48, 0x48484C34)  # HAL_KEY, RTAPI_KEY, UUID_KEY
+# HAL_KEY, RTAPI_KEY, UUID_KEY; motmod's shared memory (DEFAULT_SHMEM_KEY 100, src/emc/motion/emcmotcfg.h)
+HAL_KEYS = (0x48414C32, 0x90280A48, 0x48484C34, 100)
 env = dict(os.environ)
 env.update(INI_FILE_NAME=S["ini"], NMLFILE=NML, HAL_RTMOD_DIR="/usr/lib/linuxcnc/modules",
            RTAPI_FIFO_PATH=S["fifo"], TRAJ_COORDINATES="", KINS_KINEMATICS="trivkins")
