@@ -391,7 +391,9 @@ def test_fanuc_feeds_and_block_numbers_stay_within_its_ranges(tmp_path: Path) ->
     (B-62764EN 5, B-63684EN 13): a block too short for the largest F is written at it (slower),
     the others at their planned F to 3 decimals, block numbers wrap, and the program still verifies."""
     cl = ROOT / "examples" / "nx_variable_axis_inch.cls"
-    default = vp.load_machine(_machine_file(tmp_path, DIALECT_LINE, "default.yaml"))
+    # the reference: SINUMERIK's profile, which writes the plan's F without a limit (the default
+    # linuxcnc dialect keeps LinuxCNC's own floor on rotary blocks, planning/controller.py)
+    default = vp.load_machine(_machine_file(tmp_path, "  dialect: sinumerik\n", "default.yaml"))
     fanuc = vp.load_machine(_machine_file(tmp_path, "  dialect: fanuc\n  program_number: 7\n"
                                                     "  block_numbers: {start: 1, step: 50}\n"))
     assert post(cl, default, PostOptions(), tmp_path / "default.nc").verification.ok
@@ -400,7 +402,7 @@ def test_fanuc_feeds_and_block_numbers_stay_within_its_ranges(tmp_path: Path) ->
     text = (tmp_path / "fanuc.nc").read_text()
     words = re.findall(r"^N\d+ G1 .* F(\S+)", text, re.M)
     assert words and all(re.fullmatch(r"\d+\.\d{3}", f) for f in words) and max(map(float, words)) <= 9999.999
-    before = read_gcode((tmp_path / "default.nc").read_text())
+    before = read_gcode((tmp_path / "default.nc").read_text(), controller=default.controller.profile())
     after = read_gcode(text, controller=fanuc.controller.profile())
     assert np.array_equal(before.joints, after.joints, equal_nan=True)
     short = before.duration < 60 / 9999.999

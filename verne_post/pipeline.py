@@ -68,6 +68,7 @@ from .output.gcode import (
     write_text,
 )
 from .placement.search import Placement, place
+from .planning.controller import MODELLED
 from .planning.schedule import Schedule, feed_sequences
 from .planning.stage import (
     Planner,
@@ -262,7 +263,8 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
                 blocks.joints, blocks.tip, rapid, poses.feed[blocks.pose], poses.inverse_time[blocks.pose],
                 poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
-                options.planner, options.optimize, options.workers, figures, rapid_speed_limit(machine)))
+                options.planner, options.optimize, options.workers, figures, rapid_speed_limit(machine),
+                machine.controller.profile().dialect))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
@@ -573,7 +575,9 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         f"TOLERANCE {options.tol:g} MM {options.axis_tol:g} DEG; RAPIDS {options.rapid_tol:g} MM "
         f"{options.rapid_axis_tol:g} DEG; BLOCKS {figures.blocks} "
         f"(CL POINTS {len(poses)}, INSERTED {figures.inserted})",
-        f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]})",
+        f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]}"
+        + ("; LINUXCNC 2.9 FLOOR ON BLOCKS THAT TURN A OR C" if options.plan
+           and machine.controller.profile().dialect in MODELLED else "") + ")",
     )
     if any(isinstance(e, ToolChange) and e.tool == 0 for e in _events(poses)):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)

@@ -15,6 +15,7 @@ from ..checks.limits import Violation
 from ..machine import Machine
 from ..motion.linearise import Blocks
 from ..motion.poses import MachinePoses
+from .controller import MODELLED, rotary_block_floor
 from .schedule import Schedule, SequenceError, limit_ratios, plan_program, time_budget
 from .timing import Limits
 from .topp import Engine
@@ -107,6 +108,7 @@ class TimingTask:
     workers: int
     figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
     rapid_speed: float = NO_TIP_LIMIT  # mm/s: the tip speed limit of rapids (machine's safe.rapid_feed)
+    controller: str | None = None  # a dialect whose planner's floor the durations keep (planning.controller)
 
 
 def plan_timing(task: TimingTask) -> Timing:
@@ -121,10 +123,13 @@ def plan_timing(task: TimingTask) -> Timing:
     except SequenceError as error:
         violation = Violation(int(task.line[error.block]), "timing", f"cannot plan the feed motion: {error}")
         return Timing(task.unplanned, violations=(violation,), seconds=time.perf_counter() - start)
-    timed = Timing(schedule.duration, schedule, planned=True)
+    duration = schedule.duration
+    if task.controller in MODELLED:  # the controller's own planner cannot run a block faster
+        duration = np.maximum(duration, rotary_block_floor(task.joints, task.limits))
+    timed = Timing(duration, schedule, planned=True)
     if task.figures:  # of the planned durations, as the HTML report's
         timed = timed.with_figures(task.joints, task.tip, tip_limit(task.feed, task.inverse_time, task.tip,
-                                                                    schedule.duration),
+                                                                    duration),
                                    task.limits, task.rotary_feed)
     return replace(timed, seconds=time.perf_counter() - start)
 
