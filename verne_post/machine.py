@@ -666,37 +666,36 @@ def machine_text(path: str | Path | None = None) -> str:
     :data:`MAX_FILE_BYTES`, UTF-8: what :func:`load_machine` validates and tools that edit it keep."""
     if path is None:
         raw = (resources.files("verne_post") / "machines" / DEFAULT_MACHINE).read_bytes()
-        source = DEFAULT_MACHINE
-    else:
-        source = str(path)
-        try:
-            with open(path, "rb") as handle:
-                raw = handle.read(MAX_FILE_BYTES + 1)
-        except OSError as exc:
-            raise InputError(f"cannot read machine file: {exc.strerror or exc}", source) from None
+        return _decoded(raw, "machine file", DEFAULT_MACHINE)
+    return _bounded_text(path, "machine file", "machine file")
+
+
+def _bounded_text(path: str | Path, noun: str, read_noun: str) -> str:
+    """A YAML file's text, at most :data:`MAX_FILE_BYTES`, UTF-8; ``noun`` names it in errors
+    (``read_noun`` where it cannot be read)."""
+    source = str(path)
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read {read_noun}: {exc.strerror or exc}", source) from None
+    return _decoded(raw, noun, source)
+
+
+def _decoded(raw: bytes, noun: str, source: str) -> str:
     if len(raw) > MAX_FILE_BYTES:
-        raise InputError(f"machine file larger than {MAX_FILE_BYTES} bytes", source)
+        raise InputError(f"{noun} larger than {MAX_FILE_BYTES} bytes", source)
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError:
-        raise InputError("machine file is not UTF-8 text", source) from None
+        raise InputError(f"{noun} is not UTF-8 text", source) from None
 
 
 def load_setup(path: str | Path) -> SetupConfig:
     """A setup file (``--setup``): the keys of a machine file's ``setup:`` section (units, stock,
     fixtures) at its top level, read and validated as a machine file is (the first problem at its line)."""
     source = str(path)
-    try:
-        with open(path, "rb") as handle:
-            raw = handle.read(MAX_FILE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"cannot read the setup file: {exc.strerror or exc}", source) from None
-    if len(raw) > MAX_FILE_BYTES:
-        raise InputError(f"setup file larger than {MAX_FILE_BYTES} bytes", source)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError("setup file is not UTF-8 text", source) from None
+    text = _bounded_text(path, "setup file", "the setup file")
     data, lines = _parse_yaml(text, source)
     if not isinstance(data, dict):
         raise InputError("a setup file must be a YAML mapping of units, stock and fixtures", source)

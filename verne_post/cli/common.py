@@ -149,7 +149,14 @@ def decorated(function: Callable[..., Any], options: list[Callable[..., Any]]) -
     return function
 
 
-# The stock and fixtures ('post', 'check', 'batch', 'place').
+def setup_file(setup_path: str | None) -> dict[str, Any]:
+    """``--setup FILE`` as the PostOptions fields it sets: the file read (validated), and its path."""
+    from ..machine import load_setup
+
+    return {"setup": None if setup_path is None else load_setup(setup_path), "setup_source": setup_path}
+
+
+# The stock and fixtures ('post', 'check', 'batch', 'place', 'verify').
 setup_options = [
     click.option("--stock", multiple=True, metavar="SPEC",
                  help="The stock, in the part frame and the CL file's units: box:x0,y0,z0,x1,y1,z1, "

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from ..machine import load_machine, load_setup
+from ..machine import load_machine
 from .common import (
     AXIS_TOL,
     TIP_TOL,
@@ -17,6 +17,7 @@ from .common import (
     machine_option,
     read_cl,
     reader_option_group,
+    setup_file,
     setup_options,
     user_errors,
 )
@@ -52,8 +53,7 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
 
     machine = load_machine(machine_path)
     options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, stock=stock,
-                          fixtures=fixtures, setup=None if setup_path is None else load_setup(setup_path),
-                          setup_source=setup_path, **reading)
+                          fixtures=fixtures, **setup_file(setup_path), **reading)
     toolpath = read_cl(cl_file, **reading)
     poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length,
                           setup=setup_of(machine, options, toolpath.units))

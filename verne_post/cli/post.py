@@ -13,8 +13,8 @@ from typing import Any
 import click
 
 from ..errors import InputError, one_line
-from ..machine import Machine, load_machine, load_setup
-from .common import check_outputs, decorated, output_options, post_options, user_errors
+from ..machine import Machine, load_machine
+from .common import check_outputs, decorated, output_options, post_options, setup_file, user_errors
 from .main import main
 from .verify import print_findings
 
@@ -26,9 +26,8 @@ def options_from(no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
     offset = "auto" if auto_offset else choices["work_offset"] or None
-    setup_path = choices.pop("setup_path", None)
-    setup = None if setup_path is None else load_setup(setup_path)
-    return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing, setup=setup, setup_source=setup_path)
+    setup = setup_file(choices.pop("setup_path", None))
+    return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing, **setup)
 
 
 def run_pipeline(cl_file: str, machine_path: str | None, quiet: bool, no_timing: bool, auto_offset: bool,

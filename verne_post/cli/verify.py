@@ -20,6 +20,7 @@ from .common import (
     machine_option,
     read_cl,
     reader_option_group,
+    setup_file,
     setup_options,
     user_errors,
 )
@@ -69,7 +70,6 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     from ..bodies.world import ProgramBodies
     from ..checks.collision import tool_shapes
     from ..cl.toolpath import ToolChange
-    from ..machine import load_setup
     from ..options import PostOptions, setup_of
     from ..output.tables import write_json
     from ..verify.verifier import verify_program
@@ -81,8 +81,7 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
         raise InputError(f"cannot read the program: {error.strerror}", program) from None
     against = None if cl_file is None else read_cl(cl_file, **reading)
     # the setup in the part frame, in the CL file's units (mm without one)
-    choices = PostOptions(stock=stock, fixtures=fixtures, setup_source=setup_path,
-                          setup=None if setup_path is None else load_setup(setup_path))
+    choices = PostOptions(stock=stock, fixtures=fixtures, **setup_file(setup_path))
     setup = setup_of(machine, choices, "mm" if against is None else against.units)
     diameters = {} if against is None else {e.tool: e.diameter for e in against.events if isinstance(e, ToolChange)}
     bodies = ProgramBodies(setup, tool_shapes(machine, diameters))

@@ -85,6 +85,13 @@ def _sized(body: dict, key: str, size: int, where: str) -> list:
     return out
 
 
+def _triangles(body: dict, where: str) -> list:
+    triangles = _numbers(body.get("triangles", []))
+    if len(triangles) % 9:
+        raise ValueError(f"{where}: 'triangles' is not 9 numbers a triangle")
+    return triangles
+
+
 def _fixed(body: dict, k: int) -> dict:
     where = f"scene fixed body {k} ({body.get('name', '?')})"
     kind = body.get("kind")
@@ -102,9 +109,7 @@ def _fixed(body: dict, k: int) -> dict:
         out.update(p0=_sized(body, "p0", 3, where), p1=_sized(body, "p1", 3, where),
                    radius=_sized(body, "radius", 1, where)[0])
     elif kind == "mesh":
-        out["triangles"] = _numbers(body.get("triangles", []))
-        if len(out["triangles"]) % 9:
-            raise ValueError(f"{where}: 'triangles' is not 9 numbers a triangle")
+        out["triangles"] = _triangles(body, where)
     else:
         raise ValueError(f"{where}: kind {kind!r} is none of {', '.join(_FIXED)}")
     if "colour" in body:
@@ -122,9 +127,7 @@ def _moving(body: dict, k: int) -> dict:
     elif kind == "box":
         out["half"] = _sized(body, "half", 3, where)
     elif kind == "mesh":
-        out["triangles"] = _numbers(body.get("triangles", []))
-        if len(out["triangles"]) % 9:
-            raise ValueError(f"{where}: 'triangles' is not 9 numbers a triangle")
+        out["triangles"] = _triangles(body, where)
     else:
         raise ValueError(f"{where}: kind {kind!r} is none of {', '.join(_POSE)}")
     if "colour" in body:
