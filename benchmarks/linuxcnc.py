@@ -14,7 +14,8 @@ import time
 from pathlib import Path
 
 import verne_post as vp
-from verne_post.linuxcnc.simulate import header_cycle_time, path_deviation, simulate
+from verne_post.linuxcnc.measures import path_deviation
+from verne_post.linuxcnc.simulate import header_cycle_time, simulate
 from verne_post.options import PostOptions
 from verne_post.pipeline import post
 

@@ -23,7 +23,10 @@ from verne_post.api import forward_kinematics
 from verne_post.cli import main
 from verne_post.errors import InputError
 from verne_post.linuxcnc import export_config, simulate
-from verne_post.linuxcnc.simulate import SimulationResult, linuxcnc_available, path_deviation
+from verne_post.linuxcnc.blending import Guarded
+from verne_post.linuxcnc.measures import path_deviation
+from verne_post.linuxcnc.simulate import SimulationResult, linuxcnc_available
+from verne_post.motion.linearise import Blocks
 
 # the module: the package's name 'simulate' is the function
 simulate_module = importlib.import_module("verne_post.linuxcnc.simulate")
@@ -234,3 +237,117 @@ def test_without_an_ipc_namespace_nothing_of_linuxcnc_is_left(posted: Path, monk
     listed = subprocess.run(["ipcs", "-m", "-s"], capture_output=True, text=True, check=True).stdout
     left = {int(word, 16) for word in re.findall(r"^(0x[0-9a-f]+)\s", listed, re.M)}
     assert not keys & left, sorted(keys & left)
+
+
+# --- Guard blocks at rotary corners (verne_post.linuxcnc.blending) ---------------------------------
+
+#: A pass of the impeller's nose dome (examples/impeller_5axis.cls, lines 15460-15479): the tool tilts
+#: along the pass, then retracts along its axis. In the joints the sliders go on nearly straight at
+#: the pass's end while A and C stop: LinuxCNC's G64 P bounds the sliders' blend only, and without
+#: guards the tip left the path by 0.08 mm there (docs/linuxcnc.md).
+_DOME_CL = """PARTNO/DOME PASS
+UNITS/MM
+MULTAX/ON
+TLDATA/MILL,10.0000,5.0000,80.0000,0.0000,0.0000
+LOAD/TOOL,3,ADJUST,3
+RAPID
+GOTO/-1.8555,-93.5252,130.0000,0.077080,-0.640125,0.764394
+RAPID
+GOTO/-7.2470,-48.7500,76.5325,0.077080,-0.640125,0.764394
+FEDRAT/MMPM,600.0000
+GOTO/-7.6324,-45.5494,72.7105,0.077080,-0.640125,0.764394
+FEDRAT/MMPM,2500.0000
+GOTO/-6.6711,-45.5494,72.8407,0.090989,-0.640125,0.762864
+GOTO/-5.7077,-45.5494,72.9535,0.104868,-0.640125,0.761080
+GOTO/-4.7423,-45.5494,73.0487,0.118712,-0.640125,0.759044
+GOTO/-3.7753,-45.5494,73.1262,0.132516,-0.640125,0.756756
+GOTO/-2.8071,-45.5494,73.1862,0.146277,-0.640125,0.754217
+GOTO/-1.8380,-45.5494,73.2285,0.159989,-0.640125,0.751428
+GOTO/-0.8682,-45.5494,73.2531,0.173648,-0.640125,0.748389
+GOTO/0.1018,-45.5494,73.2601,0.187250,-0.640125,0.745102
+GOTO/1.0718,-45.5494,73.2494,0.200789,-0.640125,0.741568
+GOTO/2.0414,-45.5494,73.2211,0.214262,-0.640125,0.737788
+GOTO/3.0104,-45.5494,73.1751,0.227663,-0.640125,0.733764
+GOTO/3.9784,-45.5494,73.1114,0.240989,-0.640125,0.729496
+GOTO/4.9450,-45.5494,73.0301,0.254236,-0.640125,0.724986
+GOTO/5.9100,-45.5494,72.9313,0.267398,-0.640125,0.720235
+FEDRAT/MMPM,3000.0000
+GOTO/6.4448,-46.8296,74.3717,0.267398,-0.640125,0.720235
+GOTO/10.3308,-46.3150,74.2128,-0.036671,-0.633091,0.773209
+FEDRAT/MMPM,600.0000
+GOTO/10.4041,-45.0488,72.6664,-0.036671,-0.633091,0.773209
+FEDRAT/MMPM,2500.0000
+GOTO/9.4605,-45.0488,72.8441,-0.050494,-0.633091,0.772429
+GOTO/8.5139,-45.0488,73.0048,-0.064302,-0.633091,0.771402
+RAPID
+GOTO/8.5139,-45.0488,130.0,-0.064302,-0.633091,0.771402
+"""
+
+
+def _no_guards(machine: vp.Machine, blocks: Blocks, rapid: np.ndarray, *args: object, **kwargs: object) -> Guarded:
+    return Guarded(blocks, rapid, np.arange(len(rapid)), np.ones(len(rapid)))
+
+
+def _post_dome(folder: Path) -> Path:
+    (folder / "dome.cls").write_text(_DOME_CL)
+    program = folder / "dome.nc"
+    result = CliRunner().invoke(main, ["post", str(folder / "dome.cls"), "-o", str(program), "-q"])
+    assert result.exit_code == 0, result.output
+    return program
+
+
+def test_blend_tolerance_read_from_the_start_lines() -> None:
+    from verne_post.linuxcnc.blending import blend_tolerance
+
+    assert blend_tolerance(("G21 G90", "G64 P{tolerance:.4f} Q0"), 0.005) == 0.005
+    assert blend_tolerance(("G64 P0.02",), 0.005) == 0.02
+    assert blend_tolerance(("G21 G90 G17",), 0.005) == 0.0  # LinuxCNC's default G64: no bound
+    assert blend_tolerance(("G64 P0.01", "G61"), 0.005) is None  # exact path: no blends
+    assert blend_tolerance(("G61.1",), 0.005) is None
+    assert blend_tolerance(("G640",), 0.005) == 0.0  # not a G64
+
+
+def test_guards_lie_on_the_programs_joint_lines(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                              machine: vp.Machine) -> None:
+    """The guarded program and the one without guards make the same motion: every block end of
+    the guarded one lies on a joint-space line of the other, in order (read from both texts)."""
+    import verne_post.pipeline as pipeline
+
+    guarded = _blocks(_post_dome(tmp_path))
+    plain_dir = tmp_path / "plain"
+    plain_dir.mkdir()
+    monkeypatch.setattr(pipeline, "guard_corners", _no_guards)
+    plain = _blocks(_post_dome(plain_dir))
+    assert len(guarded) > len(plain)
+    scale = np.array([1, 1, 1, 10, 10])  # deg to ~mm at the table's reach, for the rounding only
+    segment = 0
+    for end in guarded:
+        while segment < len(plain) - 1:
+            a, b = plain[segment], plain[segment + 1]
+            ab = (b - a) * scale
+            u = float(np.clip(np.dot((end - a) * scale, ab) / max(np.dot(ab, ab), 1e-300), 0.0, 1.0))
+            if np.linalg.norm((a + u * (b - a) - end) * scale) < 2e-3:
+                break
+            segment += 1
+        assert segment < len(plain) - 1 or np.allclose(end, plain[-1], atol=1e-4), end
+    np.testing.assert_allclose(guarded[-1], plain[-1])
+
+
+def test_linuxcnc_keeps_the_tip_on_the_path_at_rotary_corners(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                              machine: vp.Machine) -> None:
+    """Run through LinuxCNC's own planner: with guards the tip stays within the tolerance of the
+    program's path (by FK of every servo sample); the same pass without them leaves it by more (the
+    test can fail: LinuxCNC blends the table's corner there)."""
+    import verne_post.pipeline as pipeline
+
+    _needs_linuxcnc()
+    guarded = _post_dome(tmp_path)
+    tol = float(re.search(r"TOLERANCE (\d+\.?\d*) MM", guarded.read_text()).group(1))
+    with_guards = path_deviation(machine, guarded.read_text(), simulate(guarded, machine, time_scale=TIME_SCALE))
+    plain_dir = tmp_path / "plain"
+    plain_dir.mkdir()
+    monkeypatch.setattr(pipeline, "guard_corners", _no_guards)
+    plain = _post_dome(plain_dir)
+    without = path_deviation(machine, plain.read_text(), simulate(plain, machine, time_scale=TIME_SCALE))
+    assert without.feeds > 3 * tol, without.feeds
+    assert with_guards.feeds <= tol, (with_guards.feeds, with_guards.worst_line)

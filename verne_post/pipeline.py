@@ -51,6 +51,7 @@ from .checks.stage import (
 from .cl import read_toolpath
 from .cl.toolpath import Event, ToolChange
 from .errors import OutputError
+from .linuxcnc.blending import blend_tolerance, guard_corners, split_durations
 from .machine import Machine
 from .motion.branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
 from .motion.linearise import Blocks
@@ -150,6 +151,21 @@ class Part:
     @property
     def own(self) -> slice:
         return slice(self.context, None)
+
+    def guarded(self, machine: Machine, poses: MachinePoses, options: PostOptions, timed: Timing
+                ) -> tuple[Part, Timing]:
+        """This part and its timing with the guard blocks the controller's blending needs
+        (:mod:`verne_post.linuxcnc.blending`; unchanged on other controllers), laid after the timing."""
+        profile = machine.controller.profile()
+        blending = blend_tolerance(profile.program_start, options.tol) if profile.dialect == "linuxcnc" else None
+        if blending is None:
+            return self, timed
+        guarded = guard_corners(machine, self.blocks, self.rapid, poses.tool_length[self.blocks.pose], tol=options.tol,
+                                rapid_tol=options.rapid_tol, blend_tolerance=blending)
+        if len(guarded.owner) == len(self.rapid):
+            return self, timed
+        duration = split_durations(guarded, timed.duration, Limits.from_machine(machine))
+        return replace(self, blocks=guarded.blocks, rapid=guarded.rapid), replace(timed, duration=duration)
 
     def timed(self, wanted: bool = True) -> Timing:
         """The part's timing (waits for the helper); not ``wanted``: as if it had not been planned."""
@@ -359,7 +375,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     poses, options, placement = _machine_poses(path, machine, options, clock)
     feasible = placement is None or placement.feasible
     part = next(_parts(machine, poses, options, len(poses), clock.lap, plan=options.plan and feasible))
-    timing = part.timed()
+    part, timing = part.guarded(machine, poses, options, part.timed())
     violations = _violations(part.checks, part.others, list(timing.violations), placement)
     warnings = list(poses.warnings) + part.warnings
     if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
@@ -489,7 +505,8 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     k = -1
     with _spool(output) as spool:
         for k, part in enumerate(_one_ahead(parts) if helped else parts):
-            timed = part.timed(wanted=not failed)  # a part after a failed one: as if not planned
+            part, timed = part.guarded(machine, poses, options, part.timed(wanted=not failed))  # a part after a
+            #                                                         failed one: as if not planned
             if isinstance(part.planning, Future):  # planned in the helper
                 clock.seconds["timing"] = clock.seconds.get("timing", 0.0) + timed.seconds
                 clock.lap("waiting")
@@ -578,6 +595,7 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
         f"CYCLE TIME {figures.time:.1f} S ({_TIME_BASIS[options.plan]}"
         + ("; LINUXCNC 2.9 FLOOR ON BLOCKS THAT TURN A OR C" if options.plan
            and machine.controller.profile().dialect in MODELLED else "") + ")",
+        _controller_model(machine, options),
     )
     if any(isinstance(e, ToolChange) and e.tool == 0 for e in _events(poses)):
         header += ("TOOL 0: TOOL DATA WITHOUT A TOOL NUMBER IN THE CL FILE; LOAD THE TOOL BY HAND",)
@@ -590,6 +608,20 @@ def _frame(machine: Machine, poses: MachinePoses, options: PostOptions, placemen
     return Program(joints=blocks.joints, rapid=positioning, duration=duration, line=poses.line[blocks.pose],
                    events=events, part_name=poses.part_name, header=header, tool_lengths=tools, name=_name(poses),
                    between=None if rapid is None else rapid & ~positioning)
+
+
+def _controller_model(machine: Machine, options: PostOptions) -> str:
+    """The header line that says how the controller is taken to run the program: what the
+    certificate and the cycle time assume (docs/linuxcnc.md, docs/controllers.md)."""
+    profile = machine.controller.profile()
+    model = "CONTROLLER MODEL: EACH BLOCK ON ITS STRAIGHT JOINT-SPACE LINE"
+    if profile.dialect != "linuxcnc":
+        return f"{model}; {profile.dialect.upper()} BLENDING AND BLOCK RATE NOT MODELLED"
+    blending = blend_tolerance(profile.program_start, options.tol)
+    if blending is None:
+        return f"{model}; LINUXCNC 2.9 EXACT PATH (G61)"
+    return (f"{model}; LINUXCNC 2.9 BLENDS (G64 P{blending:.4f}) KEPT WITHIN THE TOLERANCE BY GUARD BLOCKS AT "
+            "ROTARY CORNERS")
 
 
 def _name(poses: MachinePoses) -> str:

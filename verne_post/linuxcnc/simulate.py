@@ -34,7 +34,6 @@ import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,11 +41,7 @@ from ..errors import InputError, UserError
 from ..machine import Machine
 from .export import HAL_NAME, SERVO_PERIOD_NS, export_config
 
-if TYPE_CHECKING:
-    from ..verify.gcode_reader import GcodeProgram
-
-__all__ = ["SYSTEM_PYTHON", "PathDeviation", "SimulationResult", "header_cycle_time", "linuxcnc_available",
-           "path_deviation", "simulate"]
+__all__ = ["SYSTEM_PYTHON", "SimulationResult", "header_cycle_time", "linuxcnc_available", "simulate"]
 
 #: The Python that has LinuxCNC's ``linuxcnc`` module (Debian's ``python3-linuxcnc`` files of linuxcnc-uspace).
 SYSTEM_PYTHON = "/usr/bin/python3"
@@ -449,116 +444,6 @@ def main():
 
 main()
 '''
-
-
-@dataclass(frozen=True, eq=False)
-class PathDeviation:
-    """The tip of each servo sample against the program's own joint-space path (mm, by FK).
-
-    ``deviation`` (S,) mm: distance of each sample's tip to the nearest point of the tips of the
-    program's blocks, each block's straight joint-space line sampled densely; ``rapid`` (S,) the
-    sample runs a move between cuts (G0 or a G1 marked RAPID); ``feeds`` and ``between_cuts``
-    the largest deviation of each kind (0 if none); ``spacing`` mm, the densest tip spacing of
-    the sampled path (the measure's own error is below spacing^2 / (8 radius) on a curve).
-    """
-
-    deviation: np.ndarray
-    rapid: np.ndarray
-    feeds: float
-    between_cuts: float
-    worst_line: int
-    spacing: float
-
-
-def program_blocks(text: str, machine: Machine) -> GcodeProgram:
-    """The program's motion blocks as verne-post reads them (``verify.gcode_reader``)."""
-    from ..verify.gcode_reader import read_gcode
-
-    return read_gcode(text, controller=machine.controller.profile())
-
-
-def path_deviation(machine: Machine, text: str, result: SimulationResult, *, spacing: float = 0.2) -> PathDeviation:
-    """How far the executed tip leaves the program's path: see :class:`PathDeviation`."""
-    from scipy.spatial import cKDTree
-
-    from ..api import forward_kinematics
-
-    program = program_blocks(text, machine)
-    ok = np.all(np.isfinite(program.joints), axis=1)
-    ends, lines = program.joints[ok], program.line[ok]
-    rapid, lengths = program.rapid[ok], np.nan_to_num(program.tool_length[ok], nan=0.0)
-    if len(ends) == 0:
-        raise InputError("the program has no block with all five axes")
-    _, _, tips = _dense_path(machine, ends, lengths, spacing)
-    # each sample's block: the one the line pin names, else the last one named
-    sample_line = result.line if len(result.line) == len(result.t) else np.zeros(len(result.t), np.int64)
-    named = np.searchsorted(lines, sample_line)
-    named = np.where((named < len(lines)) & (lines[np.minimum(named, len(lines) - 1)] == sample_line), named, -1)
-    index = np.where(named >= 0, np.arange(len(named)), 0)
-    np.maximum.accumulate(index, out=index)
-    sample_block = np.where(named[index] >= 0, named[index], 0)
-    sampled = forward_kinematics(machine, result.joints, tool_length=lengths[sample_block]).tip
-    tree = cKDTree(tips)
-    _, nearest = tree.query(sampled, k=min(4, len(tips)))
-    nearest = np.atleast_2d(nearest.T).T if nearest.ndim == 1 else nearest
-    best = np.full(len(sampled), np.inf)
-    for column in range(nearest.shape[1]):
-        for side in (-1, 0):
-            a = np.clip(nearest[:, column] + side, 0, len(tips) - 1)
-            b = np.clip(a + 1, 0, len(tips) - 1)
-            best = np.minimum(best, _to_segment(sampled, tips[a], tips[b]))
-    best = np.where(np.isfinite(best), best, np.nan)
-    is_rapid = rapid[sample_block]
-    feeds = float(np.nanmax(best[~is_rapid], initial=0.0))
-    between = float(np.nanmax(best[is_rapid], initial=0.0))
-    worst = int(lines[sample_block[int(np.nanargmax(best))]]) if len(best) else 0
-    step = np.linalg.norm(np.diff(tips, axis=0), axis=1)
-    return PathDeviation(best, is_rapid, feeds, between, worst, float(step.max(initial=0.0)))
-
-
-def _dense_path(machine: Machine, ends: np.ndarray, lengths: np.ndarray, spacing: float
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each block's straight joint-space line sampled until its tips are ``spacing`` apart or closer
-    and the tip curve between two of them leaves their chord by under ``spacing / 20``: (points
-    (P, 5), the block of each (P,), their tips (P, 3))."""
-    from ..api import forward_kinematics
-
-    pieces = np.ones(len(ends), dtype=np.int64)
-    pieces[1:] = np.maximum(1, np.ceil(np.degrees(np.abs(np.diff(ends[:, 3:], axis=0))).max(axis=1)))
-    for _ in range(12):
-        points, owner, fraction = _pieces(ends, pieces)
-        tips = forward_kinematics(machine, points, tool_length=lengths[owner]).tip
-        step = np.r_[0.0, np.linalg.norm(np.diff(tips, axis=0), axis=1)]
-        middle = points - 0.5 * (points - np.r_[points[:1], points[:-1]])
-        middle_tips = forward_kinematics(machine, middle, tool_length=lengths[owner]).tip
-        previous = np.r_[tips[:1], tips[:-1]]
-        bow = np.linalg.norm(middle_tips - 0.5 * (tips + previous), axis=1)
-        coarse = (fraction > 0) & ((step > spacing) | (bow > spacing / 20))
-        blocks = np.unique(owner[coarse])
-        if len(blocks) == 0 or pieces.sum() > 5_000_000:
-            break
-        pieces[blocks] *= 2
-    return points, owner, tips
-
-
-def _pieces(ends: np.ndarray, pieces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Points along each block's joint-space line: block 0 its end only, block k ``pieces[k]``
-    points after its start; the block of each and its fraction along it (0 for block 0)."""
-    owner = np.repeat(np.arange(len(ends)), np.r_[1, pieces[1:]])
-    start = np.r_[0, np.cumsum(np.r_[1, pieces[1:]])[:-1]]
-    rank = np.arange(len(owner)) - start[owner] + 1
-    fraction = np.where(owner > 0, rank / pieces[owner], 0.0)
-    before = ends[np.maximum(owner - 1, 0)]
-    points = before + fraction[:, None] * (ends[owner] - before)
-    return points, owner, fraction
-
-
-def _to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    ab = b - a
-    length2 = np.einsum("ij,ij->i", ab, ab)
-    s = np.where(length2 > 0, np.einsum("ij,ij->i", p - a, ab) / np.where(length2 > 0, length2, 1.0), 0.0)
-    s = np.clip(s, 0.0, 1.0)
-    return np.linalg.norm(p - (a + s[:, None] * ab), axis=1)
 
 
 def header_cycle_time(text: str) -> float | None:
