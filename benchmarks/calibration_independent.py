@@ -5,9 +5,10 @@ machine file by up to +-0.5 mm, uniform), tool tips are made by the independent 
 tests/independent.py (the joint-point table and Table IV's matrices of VERNE-KINEMATICS.md,
 solved by Newton's method; nothing from verne_post.kinematics) with 3 um Gaussian noise per
 coordinate. 80 fit poses, tools 60/80/100 mm, either random usable poses or ``--plan 80`` (tips
-above the table); then ``verne-post calibrate`` and ``verne-post calibrate --check`` on 40 other
-random usable poses with other tools (45 and 130 mm), their true tips without noise. Figures
-printed, never asserted.
+in the default volume above the table); then ``verne-post calibrate``, and ``verne-post
+calibrate --check`` on 40 other poses with other tools (20 x 45 mm, 20 x 130 mm), their true
+tips without noise: random usable poses anywhere in the workspace, and random usable poses
+with the tip in --plan's default volume. Figures printed, never asserted.
 
     python benchmarks/calibration_independent.py [--geometries 6] [--seed 0]
 """
@@ -30,6 +31,7 @@ from click.testing import CliRunner  # noqa: E402
 import verne_post as vp  # noqa: E402
 from benchmarks.calibration import usable_joints  # noqa: E402
 from tests.independent import machine_tips  # noqa: E402
+from verne_post.calibration.plan import default_volume  # noqa: E402
 from verne_post.cli import main as cli  # noqa: E402
 
 NOISE = 0.003  # mm per coordinate
@@ -68,6 +70,18 @@ def check_figures(stdout: str) -> tuple[float, float]:
     return float(found.group(1)), float(found.group(2))
 
 
+def in_volume_joints(machine: vp.Machine, n: int, seed: int, tool: np.ndarray) -> np.ndarray:
+    """n random usable joint sets (mm, rad) whose tips (with ``tool``) lie in --plan's default volume."""
+    volume = default_volume(machine)
+    kept: list[np.ndarray] = []
+    for length in np.unique(tool):
+        need = int(np.sum(tool == length))
+        joints = usable_joints(machine, 60 * need, seed + int(length))
+        inside = volume.contains(vp.forward_kinematics(machine, joints, tool_length=float(length)).tip)
+        kept.append(joints[inside][:need])
+    return np.concatenate(kept)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--geometries", type=int, default=6)
@@ -75,11 +89,12 @@ def main() -> None:
     args = parser.parse_args()
     machine = vp.load_machine()
     nominal = {k: float(getattr(machine.geometry, k)) for k in GEOMETRY_KEYS}
-    validation = usable_joints(machine, 40, seed=990)
-    validation_tool = np.resize([45.0, 130.0], 40)
+    validation_tool = np.r_[np.full(20, 45.0), np.full(20, 130.0)]
+    validation = {"workspace": usable_joints(machine, 40, seed=990), "volume": in_volume_joints(
+        machine, 40, 991, validation_tool)}
     print(f"{'geometry':>8} {'poses':>7} {'nominal RMS um':>15} {'fit RMS um':>11} {'noise um':>9} "
-          f"{'valid. RMS um':>14} {'valid. max um':>14}")
-    worst = {"random": [0.0, 0.0], "plan": [0.0, 0.0]}
+          f"{'workspace RMS/max um':>21} {'volume RMS/max um':>18}")
+    worst: dict[tuple[str, str], list[float]] = {}
     with tempfile.TemporaryDirectory() as folder:
         work = Path(folder)
         run("calibrate", "--plan", "80", "-o", str(work / "plan.csv"), "--tools", "60,80,100")
@@ -90,9 +105,11 @@ def main() -> None:
             rng = np.random.default_rng(args.seed + g)
             values = {k: v + rng.uniform(-0.5, 0.5) for k, v in nominal.items()}
             offsets = rng.uniform(-0.5, 0.5, 3)
-            truth = true_tips(machine, values, offsets, validation, validation_tool)
-            check = write(work / f"valid{g}.csv", validation, validation_tool, truth)
-            nominal_rms, _ = check_figures(run("calibrate", "--check", str(check)))
+            checks = {}
+            for where, joints in validation.items():
+                truth = true_tips(machine, values, offsets, joints, validation_tool)
+                checks[where] = write(work / f"valid{g}{where}.csv", joints, validation_tool, truth)
+            nominal_rms, _ = check_figures(run("calibrate", "--check", str(checks["workspace"])))
             random_joints = usable_joints(machine, 80, seed=1000 + g)
             for kind, (joints, tool) in (("random", (random_joints, np.resize([60.0, 80.0, 100.0], 80))),
                                          ("plan", planned)):
@@ -102,12 +119,17 @@ def main() -> None:
                 stdout = run("calibrate", str(measured), "-o", str(out))
                 fit = re.search(r"-> ([0-9.]+) um .*noise estimate ([0-9.]+) um", stdout)
                 assert fit is not None, stdout
-                rms, peak = check_figures(run("calibrate", "--check", str(check), "--machine", str(out)))
-                worst[kind] = [max(worst[kind][0], rms), max(worst[kind][1], peak)]
+                shown = []
+                for where, check in checks.items():
+                    rms, peak = check_figures(run("calibrate", "--check", str(check), "--machine", str(out)))
+                    old = worst.get((kind, where), [0.0, 0.0])
+                    worst[(kind, where)] = [max(old[0], rms), max(old[1], peak)]
+                    shown.append(f"{rms:.2f}/{peak:.2f}")
                 print(f"{g:8d} {kind:>7} {nominal_rms:15.1f} {float(fit.group(1)):11.2f} {float(fit.group(2)):9.2f} "
-                      f"{rms:14.2f} {peak:14.2f}")
-    for kind, (rms, peak) in worst.items():
-        print(f"worst over the geometries, {kind} poses: validation RMS {rms:.2f} um, max {peak:.2f} um")
+                      f"{shown[0]:>21} {shown[1]:>18}")
+    for (kind, where), (rms, peak) in worst.items():
+        print(f"worst over the geometries, {kind} fit poses, validation in the {where}: RMS {rms:.2f} um, "
+              f"max {peak:.2f} um")
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ expected values are those perturbations, never numbers produced by the calibrati
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -402,6 +403,9 @@ def test_html_report_is_self_contained(measured: Path, tmp_path: Path) -> None:
     assert code == 0, stderr
     page = report.read_text()
     assert page.count("<svg") >= 3 and "<line" in page
+    # each panel scaled to its own residuals, the scale written on it: before in mm, after in um
+    before, after = (float(x) for x in re.findall(r"arrow scale: this bar = ([0-9.e+]+) um", page))
+    assert before > 1000.0 and 1.0 < after < 30.0
     assert "http://" not in page.replace('xmlns="http://www.w3.org/2000/svg"', "") and "https://" not in page
     assert "<script" not in page and "<link" not in page
 

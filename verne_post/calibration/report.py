@@ -21,13 +21,16 @@ def report_data(calibration: Calibration, measurements: Measurements, machine_so
     """Everything the report shows, as JSON-ready data (mm, degrees)."""
     c = calibration
     summary = c.summary()
+    open_names = {name for d in c.directions if d.weak for name in d.combination}
     parameters = []
     for k, name in enumerate(PARAMETERS):
         nominal, fitted = to_interface(name, c.nominal[k]), to_interface(name, c.fitted[k])
         std = to_interface(name, c.std[k]) if np.isfinite(c.std[k]) else None
         parameters.append({"name": name, "unit": unit(name), "status": c.status[name], "nominal": nominal,
                            "fitted": fitted, "change": fitted - nominal, "std": std,
-                           "reason": "fixed by --fix" if c.status[name] == "fixed" else None})
+                           "reason": "fixed by --fix" if c.status[name] == "fixed" else (
+                               "in a direction the measurements leave open (above): std mostly the prior's"
+                               if name in open_names else None)})
     poses = []
     for k, line in enumerate(measurements.lines):
         poses.append({"line": int(line), "tool_length": float(measurements.poses.tool_length[k]),

@@ -132,8 +132,9 @@ def calibrate_command(measured: str | None, machine_path: str | None, output: st
 def _plan(machine: Machine, machine_path: str | None, measured: str | None, output: str, count: int,
           tools: str | None, names: tuple[str, ...], seed: int, volume_spec: str | None) -> None:
     """``--plan``: write ``count`` poses to measure (added to ``measured`` when given)."""
-    from ..calibration import parse_volume, plan_poses, read_measurements
-    from ..calibration.directions import explain
+    from ..calibration import PARAMETERS, parse_volume, plan_poses, read_measurements
+    from ..calibration.directions import WEAK_STD, explain
+    from ..calibration.model import SCALE, to_interface, unit
 
     check_outputs(machine_path or "", output)
     if measured is not None:
@@ -153,8 +154,12 @@ def _plan(machine: Machine, machine_path: str | None, measured: str | None, outp
     for direction in plan.directions:
         if direction.weak:
             click.echo(f"not determined: {explain(direction)}")
-    worst = max(plan.std, key=plan.std.get)
-    click.echo(f"expected std with 3 um measuring noise: worst {worst} {plan.std[worst] * 1e3:.2f} um")
+    determined = {n: v for n, v in plan.std.items() if v < WEAK_STD * SCALE[PARAMETERS.index(n)]}
+    if determined:
+        worst = max(determined, key=determined.get)
+        std = to_interface(worst, determined[worst]) * 1e3
+        click.echo(f"expected std with 3 um measuring noise: worst {worst} {std:.2f} "
+                   f"{'mdeg' if unit(worst) == 'deg' else 'um'} (of the parameters the plan determines)")
 
 
 def _check(machine: Machine, path: str) -> None:
