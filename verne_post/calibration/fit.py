@@ -270,7 +270,10 @@ def _check_count(problem: _Problem) -> None:
     s = np.linalg.svd(jac, compute_uv=False)
     rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
     if problem.rows - rank < MIN_DOF:
-        need = (rank + MIN_DOF + 2) // 3
+        # Many poses determine every free parameter but the common slider zero against da.
+        names = {PARAMETERS[k] for k in problem.free}
+        most = len(names) - int({"da", "rho1_offset", "rho2_offset", "rho3_offset"} <= names)
+        need = max(n + 1, -(-(most + MIN_DOF) // 3))
         raise TooFewPosesError(f"{n} poses give {problem.rows} equations for the {rank} parameter directions they "
                                f"determine: too few to estimate the measuring noise; measure at least {need} poses "
                                "(80 for a useful fit, planned with --plan)")
