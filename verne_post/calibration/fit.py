@@ -239,7 +239,7 @@ def calibrate(p0: np.ndarray, poses: Poses, fix: tuple[str, ...] = (), reject: b
     score[used] = score_used
     outlier = ~used  # dropped by --reject
     outlier[np.flatnonzero(used)[flagged]] = True
-    robust = bool(flagged.any())
+    robust = bool(flagged.any() and not flagged.all())
     u = robust_u if robust else fit.u
     if robust:  # covariance and noise of the poses the robust fit believes
         kept = _Problem(p0, problem.poses.take(~flagged), free, problem.prior)

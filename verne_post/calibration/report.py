@@ -67,14 +67,17 @@ def _number(value: float | None, digits: int = 4) -> str:
 
 def _vector_plot(data: dict[str, Any], key: str, title: str, width: int = 460, height: int = 400) -> str:
     """SVG: measured tips in the table's x-y plane with their residual vectors, the longest
-    arrow of this panel 15 % of the plot (the scale is written on the panel)."""
+    arrow of this panel's unflagged poses 15 % of the plot (the scale is written on it)."""
     poses = data["poses"]
     xy = np.array([p["measured"][:2] for p in poses])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     span = max(float(np.max(hi - lo)), 1.0)
     pad = 40.0
     scale_xy = (min(width, height) - 2 * pad) / span
-    longest = max(max(float(np.hypot(*p[key][:2])) for p in poses), 1e-9)
+    # Scaled to the poses that do not stand out; an outlier's arrow is cut at twice the bar.
+    lengths = [float(np.hypot(*p[key][:2])) for p in poses]
+    typical = [length for length, p in zip(lengths, poses, strict=True) if not p["outlier"]] or lengths
+    longest = max(max(typical), 1e-9)
     arrow_scale = 0.15 * span / longest
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" role="img"><title>{html.escape(title)}</title>',
@@ -83,7 +86,8 @@ def _vector_plot(data: dict[str, Any], key: str, title: str, width: int = 460, h
     for p in poses:
         x0 = pad + (p["measured"][0] - lo[0]) * scale_xy
         y0 = height - pad - (p["measured"][1] - lo[1]) * scale_xy
-        dx, dy = p[key][0] * arrow_scale * scale_xy, p[key][1] * arrow_scale * scale_xy
+        cut = min(1.0, 2.0 * longest / max(float(np.hypot(*p[key][:2])), 1e-12))
+        dx, dy = (p[key][0] * cut * arrow_scale * scale_xy, p[key][1] * cut * arrow_scale * scale_xy)
         colour = "#c00" if p["outlier"] else ("#888" if not p["used"] else "#1f5fa8")
         parts.append(f'<circle cx="{x0:.1f}" cy="{y0:.1f}" r="2" fill="{colour}"><title>line {p["line"]}: '
                      f'{p[key.replace("residual", "norm")] * 1000:.1f} um</title></circle>')
