@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 
 import verne_post as vp  # noqa: E402
 from verne_post.api import Status, classify, pose_margins  # noqa: E402
-from verne_post.calibration import PARAMETERS, Poses, calibrate, parameters_of, predict  # noqa: E402
+from verne_post.calibration import Poses, calibrate, parameters_of, predict  # noqa: E402
 
 
 def usable_joints(machine: vp.Machine, n: int, seed: int) -> np.ndarray:
@@ -56,7 +56,7 @@ def main() -> None:
     check_tool = np.resize([45.0, 130.0], 200)
     check_tip = predict(truth, check, check_tool).tip
     print(f"{'poses':>6} {'fit s (best)':>13} {'poses/s':>9} {'evals':>6} {'RMS after um':>13} "
-          f"{'held-out RMS um':>16} held")
+          f"{'held-out RMS um':>16} open directions")
     for n in args.sizes:
         joints = usable_joints(machine, n, seed=n)
         tool = np.resize([60.0, 80.0, 100.0], n)
@@ -69,9 +69,9 @@ def main() -> None:
             best = min(best, time.perf_counter() - start)
         error = predict(result.fitted, check, check_tool).tip - check_tip
         held_out = np.sqrt(np.mean(np.sum(error**2, axis=1))) * 1e3
-        held = [name for name in PARAMETERS if result.status[name] != "fitted"]
+        held = [",".join(d.combination) for d in result.directions if d.weak]
         print(f"{n:6d} {best:13.3f} {n / best:9.0f} {result.evaluations:6d} "
-              f"{result.summary()['rms_after'] * 1e3:13.2f} {held_out:16.2f} {','.join(held)}")
+              f"{result.summary()['rms_after'] * 1e3:13.2f} {held_out:16.2f} {'; '.join(held)}")
 
 
 if __name__ == "__main__":

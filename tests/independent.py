@@ -74,3 +74,54 @@ def coupling(g: Geometry, platform: np.ndarray, alpha: np.ndarray) -> np.ndarray
     c = np.cos(alpha)
     return (g.R1**2 * s2 * x1**2 + (g.r1**2 - 2 * g.R1 * g.r1 * c + g.R1**2) * y**2
             - g.R1**2 * s2 * (g.L1**2 - (g.R1**2 + g.r1**2 - 2 * g.R1 * g.r1 * c)))
+
+
+def module_pose(g: Geometry, rho: np.ndarray, platform: np.ndarray, alpha: np.ndarray, iterations: int = 50
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Platform centre (N, 3) in R_b and alpha (N,) that close the four rods of the joint-point
+    table at slider heights ``rho`` (N, 3): Newton's method on :func:`rod_residuals` from the
+    start ``platform``, ``alpha`` (it picks the assembly; the equations decide the pose)."""
+    points_y = np.array([g.R1, -g.R1, -g.R2, g.R2])
+    sliders_y = np.array([g.r1, -g.r1, -g.r4, g.r4])
+    dx = np.array([g.D1_minus_d1, g.D1_minus_d1, g.D2_minus_d2, g.D2_minus_d2])
+    platform, alpha = platform.astype(float).copy(), alpha.astype(float).copy()
+    for _ in range(iterations):
+        f = rod_residuals(g, platform, alpha, rho)
+        c, s = np.cos(alpha)[:, None], np.sin(alpha)[:, None]
+        bx = platform[:, :1] + dx
+        by = platform[:, 1:2] + points_y * c - sliders_y
+        bz = platform[:, 2:3] + points_y * s - rho[:, [0, 0, 1, 2]]
+        jac = 2 * np.stack([bx, by, bz, by * (-points_y * s) + bz * (points_y * c)], axis=-1)
+        step = np.linalg.solve(jac, f[..., None])[..., 0]
+        platform -= step[:, :3]
+        alpha -= step[:, 3]
+        if np.max(np.abs(step)) < 1e-12:
+            break
+    return platform, alpha
+
+
+def tool_from_platform(g: Geometry, platform: np.ndarray, alpha: np.ndarray, theta1: np.ndarray, theta2: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Tool tip (N, 3) and axis in R_t: the tip at (0, 0, Delta) in R_pl = Trans(P) Rot(x, alpha),
+    the axis minus the platform's z axis, brought into R_t by the inverse of Table IV's chain."""
+    pose = trans(platform[:, 0], platform[:, 1], platform[:, 2]) @ rot_x(alpha)
+    tip_base = np.einsum("nij,j->ni", pose, np.array([0.0, 0.0, g.delta, 1.0]))
+    axis_base = -pose[:, :3, 2]
+    inverse = np.linalg.inv(table_transform(g, theta1, theta2))
+    return np.einsum("nij,nj->ni", inverse, tip_base)[:, :3], np.einsum("nij,nj->ni", inverse[:, :3, :3], axis_base)
+
+
+def machine_tips(p: np.ndarray, joints: np.ndarray, tool_length: np.ndarray, platform: np.ndarray,
+                 alpha: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tool tips (N, 3) mm and axes in R_t of a VERNE with parameters ``p``: the 12 geometry
+    values (mm, the machine file's order), the slider zeros (mm) and table-angle zeros (rad),
+    true joint = reading + zero, at readings ``joints`` (N, 5) mm/rad with tools (N,) mm.
+    ``platform``, ``alpha``: a nearby pose of the module to start Newton's method from."""
+    true = joints + np.asarray(p[12:17])
+    tips, axes = np.empty((len(joints), 3)), np.empty((len(joints), 3))
+    for length in np.unique(tool_length):
+        rows = tool_length == length
+        g = Geometry(*(float(v) for v in p[:12]), tool_length=float(length))
+        found, tilt = module_pose(g, true[rows, :3], platform[rows], alpha[rows])
+        tips[rows], axes[rows] = tool_from_platform(g, found, tilt, true[rows, 3], true[rows, 4])
+    return tips, axes

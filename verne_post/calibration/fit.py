@@ -1,9 +1,14 @@
-"""Identification: nonlinear least squares on the forward-kinematics residuals, identifiability
-by the SVD of the scaled Jacobian, robust outlier flags.
+"""Identification: least squares on the forward-kinematics residuals with a weak prior toward
+the machine file, a robust first pass, outlier flags and the covariance of the result.
 
 Residuals are predicted minus measured tool tips (mm, table frame), times the square root of
 each pose's weight; a measured tool axis adds its three components times
-:data:`~.model.AXIS_LENGTH`. Parameters are fitted as ``(p - p_nominal) / SCALE``. Pure: no I/O.
+:data:`~.model.AXIS_LENGTH`. Parameters are fitted as ``u = (p - p_file) / SCALE``, and the
+residual vector ends with ``sigma * u``: a prior of one typical error on every parameter,
+weighed against the measuring noise ``sigma`` (estimated from the residuals). Where the tips
+determine a direction to a small fraction of a typical error the prior changes nothing; where
+they say nothing (the common slider zero against da) it keeps the file's values. No parameter
+is held unless asked (``fix``). Pure: no I/O.
 """
 
 from __future__ import annotations
@@ -12,31 +17,29 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 from ..errors import UserError
-from .model import AXIS_LENGTH, PARAMETERS, SCALE, UNREACHABLE_RESIDUAL, Poses, jacobian, predict
+from .directions import RANK_RTOL, Direction, directions, explain
+from .model import AXIS_LENGTH, PARAMETERS, SCALE, UNREACHABLE_RESIDUAL, Poses, Prediction, jacobian, predict
 
-#: Directions of the column-normalised Jacobian with a singular value below this fraction of
-#: the largest are exact dependencies (the measurements cannot tell the parameters apart at all).
-RANK_RTOL = 1e-9
+#: Noise (mm) assumed by the first pass, before the residuals give it.
+SIGMA_GUESS = 0.003
 
-#: A direction whose standard deviation after the fit exceeds this many typical errors
-#: (:data:`~.model.SCALE`) is determined no better than the nominal value already is: it is
-#: held, not fitted to noise.
-WEAK_STD = 0.5
+#: The robust first pass: soft-L1 loss with its knee at this many noise standard deviations.
+ROBUST_KNEE = 2.5
 
-#: Which parameter of an inseparable combination is held at its nominal value, first first: the
-#: table-side dimensions (measured when the machine is set up) before the link dimensions, the
-#: slider zeros last (they are what a calibration is usually for).
-HOLD_ORDER = ("da", "dt", "spindle_nose", "theta1_offset", "theta2_offset", "r1", "r4", "R1", "R2", "D1_minus_d1",
-              "D2_minus_d2", "L1", "L2", "L3", "rho1_offset", "rho2_offset", "rho3_offset")
-
-#: A pose is an outlier when its residual norm exceeds the median by this many robust standard
-#: deviations (1.4826 times the median absolute deviation of the norms).
-OUTLIER_Z = 6.0
+#: Probability that a clean data set has any pose flagged (the threshold on each pose's
+#: standardised residual is the quantile of OUTLIER_ALPHA / poses).
+OUTLIER_ALPHA = 1e-3
 
 #: Rounds of fit, reject, refit with ``reject``.
 MAX_REJECT_ROUNDS = 5
+
+#: Residual degrees of freedom (equations less the directions the poses determine) needed to
+#: estimate the noise at all.
+MIN_DOF = 3
 
 
 class FitError(UserError):
@@ -45,14 +48,8 @@ class FitError(UserError):
     exit_code = 3
 
 
-@dataclass(frozen=True)
-class Direction:
-    """One singular direction of the scaled Jacobian: relative singular value and its
-    parameter combination (name -> component, largest first, the small ones left out)."""
-
-    relative: float
-    std: float  # in typical errors (SCALE units); NaN before a fit
-    combination: dict[str, float]
+class TooFewPosesError(UserError):
+    """Too few poses to estimate the measuring noise (bad input: exit code 2)."""
 
 
 @dataclass(frozen=True)
@@ -60,19 +57,21 @@ class Calibration:
     """Result of :func:`calibrate`. Parameters in mm and rad (see :mod:`.model`)."""
 
     nominal: np.ndarray  # (17,)
-    fitted: np.ndarray  # (17,): nominal where not fitted
-    std: np.ndarray  # (17,) standard deviation of the fitted values (NaN where held)
-    status: dict[str, str]  # name -> fitted | fixed | held
-    reasons: dict[str, str]  # name -> why it is held (held parameters only)
+    fitted: np.ndarray  # (17,): nominal where fixed
+    std: np.ndarray  # (17,) posterior standard deviation of the values (NaN where fixed)
+    status: dict[str, str]  # name -> fitted | fixed
+    notes: list[str]  # what the measurements leave open, in the shop's words
     residual_before: np.ndarray  # (N, 3) predicted - measured tip, nominal, mm
     residual_after: np.ndarray  # (N, 3) fitted, mm
     used: np.ndarray  # (N,) bool: poses in the final fit
-    outlier: np.ndarray  # (N,) bool: flagged by the robust statistic (after the fit)
-    robust_z: np.ndarray  # (N,) (norm - median) / (1.4826 MAD)
+    outlier: np.ndarray  # (N,) bool: flagged on the robust fit's residuals
+    score: np.ndarray  # (N,) standardised tip residual (noise standard deviations, leverage corrected)
+    threshold: float  # score above which a pose is flagged
     sigma: float  # mm: noise estimated from the final fit's residuals
     directions: list[Direction]  # identifiability table of the final fit
     evaluations: int
     message: str
+    robust: bool = False  # the values are the robust fit's (outliers flagged, not rejected)
     free: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, float]:
@@ -90,12 +89,26 @@ def residuals(p: np.ndarray, poses: Poses) -> tuple[np.ndarray, np.ndarray]:
 
 
 class _Problem:
-    """The weighted residual vector and its Jacobian in scaled variables u over free parameters."""
+    """Weighted residuals and their Jacobian in scaled variables u over the free parameters,
+    data rows (tips, then measured axes) followed by the prior's rows ``prior * u``."""
 
-    def __init__(self, p0: np.ndarray, poses: Poses, free: np.ndarray) -> None:
-        self.p0, self.poses, self.free = p0, poses, free
+    def __init__(self, p0: np.ndarray, poses: Poses, free: np.ndarray, prior: float) -> None:
+        self.p0, self.poses, self.free, self.prior = p0, poses, free, prior
         self.root_w = np.sqrt(poses.weight)
         self.axis_rows = poses.has_axis
+        self.rows = 3 * len(poses) + 3 * int(self.axis_rows.sum())
+        # The platform's tilt at the start: the trial geometries are near it (a fast FK), and
+        # the last prediction is kept, for the Jacobian asks for the point the residuals did.
+        start = predict(p0, poses.joints, poses.tool_length)
+        self.alpha_guess = np.where(start.reachable, start.alpha, 0.0)
+        self._last: tuple[bytes, Prediction] | None = None
+
+    def predict(self, u: np.ndarray) -> Prediction:
+        key = u.tobytes()
+        if self._last is None or self._last[0] != key:
+            self._last = (key, predict(self.parameters(u), self.poses.joints, self.poses.tool_length,
+                                       self.alpha_guess))
+        return self._last[1]
 
     def parameters(self, u: np.ndarray) -> np.ndarray:
         p = self.p0.copy()
@@ -105,161 +118,165 @@ class _Problem:
     def _stack(self, tip: np.ndarray, axis: np.ndarray) -> np.ndarray:
         """Weighted rows: tips (N, 3[, P]) then the measured axes' rows, flattened to (M[, P])."""
         w = self.root_w.reshape((-1, 1) + (1,) * (tip.ndim - 2))
-        parts = [tip * w]
-        if self.axis_rows.any():
-            parts.append(axis[self.axis_rows] * w[self.axis_rows] * AXIS_LENGTH)
+        parts = [tip * w, axis[self.axis_rows] * w[self.axis_rows] * AXIS_LENGTH]
         return np.concatenate(parts, axis=0).reshape(-1, *tip.shape[2:])
 
-    def fun(self, u: np.ndarray) -> np.ndarray:
-        p = self.parameters(u)
-        fk = predict(p, self.poses.joints, self.poses.tool_length)
+    def data(self, u: np.ndarray) -> np.ndarray:
+        fk = self.predict(u)
         tip = np.where(fk.reachable[:, None], fk.tip - self.poses.tip, UNREACHABLE_RESIDUAL)
         axis = np.where(fk.reachable[:, None], fk.axis - self.poses.axis, 0.0)
         return self._stack(tip, axis)
 
-    def jac(self, u: np.ndarray) -> np.ndarray:
+    def data_jac(self, u: np.ndarray) -> np.ndarray:
         p = self.parameters(u)
-        fk = predict(p, self.poses.joints, self.poses.tool_length)
-        d_tip, d_axis = jacobian(p, self.poses.joints, self.poses.tool_length, fk)
+        d_tip, d_axis = jacobian(p, self.poses.joints, self.poses.tool_length, self.predict(u))
         scale = SCALE[self.free]
         return self._stack(d_tip[:, :, self.free] * scale, d_axis[:, :, self.free] * scale)
 
+    def fun(self, u: np.ndarray) -> np.ndarray:
+        return np.r_[self.data(u), self.prior * u]
 
-def directions(jac: np.ndarray, names: list[str], sigma: float | None
-                ) -> tuple[np.ndarray, np.ndarray, list[Direction]]:
-    """Relative singular values of the column-normalised Jacobian, the right singular vectors, and
-    the identifiability table; ``std`` from the unnormalised SVD when the noise ``sigma`` is known."""
-    norms = np.linalg.norm(jac, axis=0)
-    norms[norms == 0] = 1.0
-    _, s, vt = np.linalg.svd(jac / norms, full_matrices=False)
-    relative = s / s[0]
-    std = np.full(len(s), np.nan)
-    if sigma is not None:
-        _, s_raw, _ = np.linalg.svd(jac, full_matrices=False)
-        with np.errstate(divide="ignore"):
-            std = sigma / s_raw
-    table = []
-    for k in range(len(s)):
-        v = vt[k] / np.max(np.abs(vt[k]))
-        combination = {names[j]: round(float(v[j]), 3) for j in np.argsort(-np.abs(v)) if abs(v[j]) >= 0.1}
-        table.append(Direction(float(relative[k]), float(std[k]), combination))
-    return relative, vt, table
+    def jac(self, u: np.ndarray) -> np.ndarray:
+        return np.vstack([self.data_jac(u), self.prior * np.eye(len(u))])
 
 
-def hold_for(vector: np.ndarray, names: list[str]) -> str:
-    """The parameter to hold for a dependent direction: of those taking part in it (component
-    at least 0.3 of the largest), the first in :data:`HOLD_ORDER`."""
-    weight = np.abs(vector) / np.max(np.abs(vector))
-    involved = [names[j] for j in np.flatnonzero(weight >= 0.3)]
-    return min(involved, key=HOLD_ORDER.index)
+@dataclass(frozen=True)
+class _Fit:
+    u: np.ndarray
+    data: np.ndarray  # weighted data residuals (M,)
+    jac: np.ndarray  # (M, P) data rows
+    sigma: float
+    evaluations: int
+    message: str
 
 
-def describe(vector: np.ndarray, names: list[str]) -> str:
-    v = vector / np.max(np.abs(vector))
-    return " ".join(f"{v[j]:+.2f} {names[j]}" for j in np.argsort(-np.abs(v)) if abs(v[j]) >= 0.1)
+def _solve(problem: _Problem, u0: np.ndarray, max_evaluations: int, loss: str = "linear", knee: float = 1.0
+           ) -> tuple[np.ndarray, int, str]:
+    found = least_squares(problem.fun, u0, jac=problem.jac, method="trf", loss=loss, f_scale=knee, x_scale=1.0,
+                          xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_evaluations)
+    if found.status <= 0 or not np.all(np.isfinite(found.x)):
+        raise FitError(f"the fit did not converge after {found.nfev} evaluations: {found.message}")
+    if np.any(np.abs(found.fun[: problem.rows]) >= UNREACHABLE_RESIDUAL):
+        raise FitError("the fit did not converge: at the best geometry found some measured poses have no working "
+                       "assembly (the measurements do not fit this machine)")
+    return found.x, int(found.nfev), str(found.message)
 
 
-def _robust_z(norms: np.ndarray, used: np.ndarray) -> np.ndarray:
-    """(norm - median) / (1.4826 MAD) with median and MAD of the poses ``used`` (a dropped pose
-    is measured against the others)."""
-    median = np.median(norms[used])
-    mad = 1.4826 * np.median(np.abs(norms[used] - median))
-    return (norms - median) / max(mad, 1e-12)
+def _noise(data: np.ndarray, jac: np.ndarray, prior: float) -> float:
+    """Noise estimate (mm): residual sum of squares over the equations the fit leaves free
+    (rows less the effective number of parameters, sum s^2 / (s^2 + prior^2))."""
+    s = np.linalg.svd(jac, compute_uv=False)
+    dof = len(data) - float(np.sum(s**2 / (s**2 + prior**2)))
+    return float(np.sqrt(np.sum(data**2) / max(dof, 1.0)))
+
+
+def _least_squares_fit(problem: _Problem, max_evaluations: int) -> _Fit:
+    """The fit with the prior weighed against a guessed noise, then against the noise found."""
+    u, evaluations, _ = _solve(problem, np.zeros(len(problem.free)), max_evaluations)
+    problem.prior = _noise(problem.data(u), problem.data_jac(u), problem.prior)
+    u, more, message = _solve(problem, u, max_evaluations)
+    data, jac = problem.data(u), problem.data_jac(u)
+    return _Fit(u, data, jac, _noise(data, jac, problem.prior), evaluations + more, message)
+
+
+def _scores(problem: _Problem, fit_u: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Each pose's tip residual in noise standard deviations, leverage corrected
+    (sqrt(r^T (I - H_ii)^-1 r) / sigma: chi with 3 degrees of freedom on clean data), and the
+    score above which a pose is an outlier. The noise comes from the poses below a first,
+    median-based cut (an outlier does not inflate it); the threshold allows for that estimate's
+    own scatter (F distribution), so that a clean set of any size is flagged with probability
+    :data:`OUTLIER_ALPHA`. Returns the scores, the threshold and that noise (mm)."""
+    n = len(problem.poses)
+    data = problem.data(fit_u)[: 3 * n].reshape(n, 3)
+    jac = problem.data_jac(fit_u)
+    tip_jac = jac[: 3 * n].reshape(n, 3, -1)
+    inverse = np.linalg.inv(jac.T @ jac + problem.prior**2 * np.eye(jac.shape[1]))
+    hat = np.einsum("nip,pq,njq->nij", tip_jac, inverse, tip_jac)
+    # A pose the fit leans on alone (leverage near 1) says little about itself: floor at 1 %.
+    values, vectors = np.linalg.eigh(np.eye(3) - hat)
+    rest_inv = np.einsum("nij,nj,nkj->nik", vectors, 1.0 / np.maximum(values, 0.01), vectors)
+    t = np.einsum("ni,nij,nj->n", data, rest_inv, data)
+    first = t / max(float(np.median(t)) / chi2.median(3), 1e-30) > chi2.isf(OUTLIER_ALPHA / n, 3)
+    clean = t[~first] if (~first).any() else t
+    sigma2 = max(float(np.mean(clean)) / 3.0, 1e-30)
+    threshold = float(np.sqrt(3.0 * f_dist.isf(OUTLIER_ALPHA / n, 3, 3 * len(clean))))
+    return np.sqrt(t / sigma2), threshold, float(np.sqrt(sigma2))
 
 
 def calibrate(p0: np.ndarray, poses: Poses, fix: tuple[str, ...] = (), reject: bool = False,
               max_evaluations: int = 200) -> Calibration:
     """Fit the parameters (17,) mm/rad starting from ``p0`` to the measured ``poses``.
 
-    ``fix`` names parameters held at their ``p0`` value. Exact dependencies (found before the
-    fit) and combinations determined worse than :data:`WEAK_STD` typical errors (after it) are
-    held too, one parameter each, chosen by :data:`HOLD_ORDER`. With ``reject``, poses flagged
-    as outliers are dropped and the fit repeated until none is flagged. Raises :class:`FitError`
-    when the solver does not converge.
+    ``fix`` names parameters held at their ``p0`` value; every other one is fitted, the prior
+    toward ``p0`` deciding only the directions the tips do not determine (reported in
+    ``notes``). A robust pass (soft-L1) flags the poses that stand out; with ``reject`` they
+    are dropped and the fit repeated until none is, without it the values are the robust
+    pass's. Raises :class:`FitError` when the solver does not converge and
+    :class:`~verne_post.errors.UserError` when the poses are too few to estimate the noise.
     """
     unknown = [n for n in fix if n not in PARAMETERS]
     if unknown:
         raise UserError(f"--fix: unknown parameter '{unknown[0]}' (one of {', '.join(PARAMETERS)})")
+    status = {n: ("fixed" if n in fix else "fitted") for n in PARAMETERS}
+    free = np.array([k for k, n in enumerate(PARAMETERS) if status[n] == "fitted"], dtype=int)
     used = np.ones(len(poses), bool)
     before_tip, _ = residuals(p0, poses)
+    evaluations = 0
     for _round in range(MAX_REJECT_ROUNDS + 1):
-        # What is held is decided afresh for each set of poses.
-        status = {n: ("fixed" if n in fix else "fitted") for n in PARAMETERS}
-        reasons: dict[str, str] = {n: "fixed by --fix" for n in fix}
-        p, jac, sigma, free, evaluations, message = _fit_used(p0, poses, used, status, reasons, max_evaluations)
-        after_tip, _ = residuals(p, poses)
-        z = _robust_z(np.linalg.norm(after_tip, axis=1), used)
-        outlier = z > OUTLIER_Z
-        if not reject or not np.any(outlier & used):
+        problem = _Problem(p0, poses.take(used), free, SIGMA_GUESS)
+        _check_count(problem)
+        fit = _least_squares_fit(problem, max_evaluations)
+        evaluations += fit.evaluations
+        # The knee at the noise of the poses that do not stand out: an outlier must not widen it.
+        robust_u, more, _ = _solve(problem, fit.u, max_evaluations, "soft_l1", ROBUST_KNEE * _scores(problem, fit.u)[2])
+        evaluations += more
+        score_used, threshold, _ = _scores(problem, robust_u)
+        flagged = score_used > threshold
+        if not reject or not flagged.any() or flagged.all():
             break
-        used = used & ~outlier
-    names = [PARAMETERS[k] for k in free]
-    _, _, table = directions(jac, names, sigma)
+        used[np.flatnonzero(used)[flagged]] = False
+    score = np.full(len(poses), np.nan)
+    score[used] = score_used
+    outlier = ~used  # dropped by --reject
+    outlier[np.flatnonzero(used)[flagged]] = True
+    robust = bool(flagged.any() and not flagged.all())
+    u = robust_u if robust else fit.u
+    if robust:  # covariance and noise of the poses the robust fit believes
+        kept = _Problem(p0, problem.poses.take(~flagged), free, problem.prior)
+        data, jac = kept.data(u), kept.data_jac(u)
+        sigma = _noise(data, jac, problem.prior)
+    else:
+        data, jac, sigma = fit.data, fit.jac, fit.sigma
+    p = problem.parameters(u)
+    covariance = sigma**2 * np.linalg.inv(jac.T @ jac + sigma**2 * np.eye(len(free)))
     std = np.full(len(PARAMETERS), np.nan)
-    try:
-        covariance = sigma**2 * np.linalg.inv(jac.T @ jac)
-        std[free] = np.sqrt(np.diag(covariance)) * SCALE[free]
-    except np.linalg.LinAlgError:
-        pass
-    return Calibration(p0.copy(), p, std, status, reasons, before_tip, after_tip, used, outlier, z, sigma, table,
-                       evaluations, message, names)
+    std[free] = np.sqrt(np.diag(covariance)) * SCALE[free]
+    free_list = [int(k) for k in free]
+    table = directions(jac, free_list, sigma)
+    notes = [explain(d) for d in table if d.weak]
+    after_tip, _ = residuals(p, poses)
+    # Poses dropped by --reject are scored against the final fit's noise.
+    dropped = ~used
+    if dropped.any():
+        score[dropped] = np.linalg.norm(after_tip[dropped] * np.sqrt(poses.weight[dropped, None]), axis=1) / sigma
+    return Calibration(p0.copy(), p, std, status, notes, before_tip, after_tip, used, outlier, score, threshold,
+                       sigma, table, evaluations, fit.message, robust, [PARAMETERS[k] for k in free_list])
 
 
-def _fit_used(p0: np.ndarray, poses: Poses, used: np.ndarray, status: dict[str, str], reasons: dict[str, str],
-              max_evaluations: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, int, str]:
-    """Fit on the poses ``used``; updates ``status``/``reasons`` with the parameters it holds."""
-    subset = poses.take(used)
-    # Exact dependencies first, at the start values.
-    while True:
-        free = np.array([k for k, n in enumerate(PARAMETERS) if status[n] == "fitted"])
-        problem = _Problem(p0, subset, free)
-        _check_count(problem, free)
-        names = [PARAMETERS[k] for k in free]
-        relative, vt, _ = directions(problem.jac(np.zeros(len(free))), names, None)
-        if relative[-1] >= RANK_RTOL:
-            break
-        hold = hold_for(vt[-1], names)
-        status[hold] = "held"
-        reasons[hold] = f"cannot be told apart from the others of {describe(vt[-1], names)} (exact dependency)"
-    # Then fit, and hold what the fit determines no better than the nominal value already is.
-    while True:
-        free = np.array([k for k, n in enumerate(PARAMETERS) if status[n] == "fitted"])
-        problem = _Problem(p0, subset, free)
-        _check_count(problem, free)
-        found = least_squares(problem.fun, np.zeros(len(free)), jac=problem.jac, method="trf", x_scale=1.0,
-                              xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=max_evaluations)
-        if found.status <= 0 or not np.all(np.isfinite(found.x)):
-            raise FitError(f"the fit did not converge after {found.nfev} evaluations: {found.message}")
-        p = problem.parameters(found.x)
-        jac = problem.jac(found.x)
-        dof = max(len(found.fun) - len(free), 1)
-        sigma = float(np.sqrt(np.sum(found.fun**2) / dof))
-        if np.any(np.abs(found.fun) >= UNREACHABLE_RESIDUAL):
-            raise FitError("the fit did not converge: at the best geometry found some measured poses have no working "
-                           "assembly (the measurements do not fit this machine)")
-        names = [PARAMETERS[k] for k in free]
-        # The noise for this test without the poses that stand out: an outlier must not make
-        # well-determined parameters look weak.
-        tip_rows = found.fun[: 3 * len(subset)].reshape(-1, 3)
-        clean = _robust_z(np.linalg.norm(tip_rows, axis=1), np.ones(len(subset), bool)) <= OUTLIER_Z
-        clean_rows = 3 * int(clean.sum())
-        clean_sigma = float(np.sqrt(np.sum(tip_rows[clean] ** 2) / max(clean_rows - len(free), 1)))
-        relative, vt, table = directions(jac, names, clean_sigma)
-        weak = [k for k, d in enumerate(table) if not d.std <= WEAK_STD]
-        if not weak:
-            return p, jac, sigma, free, found.nfev, str(found.message)
-        k = weak[-1]
-        hold = hold_for(vt[k], names)
-        status[hold] = "held"
-        reasons[hold] = (f"the measurements determine {describe(vt[k], names)} only to {table[k].std:.2g} typical "
-                         "errors (weakly identifiable)")
+def _check_count(problem: _Problem) -> None:
+    """Refuse poses too few to estimate the noise: rows less the directions they determine."""
+    n = len(problem.poses)
+    jac = problem.data_jac(np.zeros(len(problem.free)))
+    s = np.linalg.svd(jac, compute_uv=False)
+    rank = int(np.sum(s > RANK_RTOL * s[0])) if s.size and s[0] > 0 else 0
+    if problem.rows - rank < MIN_DOF:
+        # Many poses determine every free parameter but the common slider zero against da.
+        names = {PARAMETERS[k] for k in problem.free}
+        most = len(names) - int({"da", "rho1_offset", "rho2_offset", "rho3_offset"} <= names)
+        need = max(n + 1, -(-(most + MIN_DOF) // 3))
+        raise TooFewPosesError(f"{n} poses give {problem.rows} equations for the {rank} parameter directions they "
+                               f"determine: too few to estimate the measuring noise; measure at least {need} poses "
+                               "(80 for a useful fit, planned with --plan)")
 
 
-def _check_count(problem: _Problem, free: np.ndarray) -> None:
-    rows = 3 * len(problem.poses) + 3 * int(problem.axis_rows.sum())
-    if rows <= len(free):
-        raise UserError(f"{len(problem.poses)} poses give {rows} equations for {len(free)} free parameters: "
-                        f"at least {len(free) // 3 + 1} poses are needed (many more for a useful fit)")
-
-
-__all__ = ["Calibration", "Direction", "FitError", "calibrate", "residuals"]
+__all__ = ["Calibration", "FitError", "TooFewPosesError", "calibrate", "residuals"]

@@ -9,7 +9,6 @@ file with one.
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 
@@ -40,12 +39,14 @@ class Measurements:
     poses: Poses
     lines: np.ndarray  # (N,) 1-based line in the file
     source: str
+    notes: tuple[str, ...] = ()  # how the file was read (a spreadsheet's separators)
 
 
 def read_measurements(path: str | os.PathLike[str], machine: Machine) -> Measurements:
     """Read and check a measurement CSV against ``machine`` (its travel and its kinematics)."""
     source = str(path)
-    columns, lines = read_table(path, REQUIRED, OPTIONAL)
+    notes: list[str] = []
+    columns, lines = read_table(path, REQUIRED, OPTIONAL, notes)
     n = len(lines)
     if n == 0:
         raise InputError("no measured poses (only a header)", source, _last_line(path))
@@ -104,17 +105,7 @@ def read_measurements(path: str | os.PathLike[str], machine: Machine) -> Measure
         raise InputError(f"measured tip is {deviation[bad[0]]:.1f} mm from where the machine file puts it (more than "
                          f"{MAX_DEVIATION:g} mm: wrong row, frame, units or tool length?)", source, int(lines[bad[0]]))
     axis = axis / np.where(np.isfinite(norm), norm, 1.0)[:, None]
-    return Measurements(Poses(radians, tool, tip, axis, weight), lines, source)
-
-
-def check_pose_count(measurements: Measurements, free: int) -> None:
-    """Refuse fewer equations than free parameters, naming the file's last measured line."""
-    poses = measurements.poses
-    rows = 3 * len(poses) + 3 * int(poses.has_axis.sum())
-    if rows <= free:
-        need = math.floor(free / 3) + 1
-        raise InputError(f"{len(poses)} poses for {free} free parameters: at least {need} poses are needed (and "
-                         "many more for a useful fit, e.g. 80)", measurements.source, int(measurements.lines[-1]))
+    return Measurements(Poses(radians, tool, tip, axis, weight), lines, source, tuple(notes))
 
 
 def _header_line(path: str | os.PathLike[str]) -> int | None:
@@ -137,4 +128,4 @@ def _last_line(path: str | os.PathLike[str]) -> int | None:
         return None
 
 
-__all__ = ["OPTIONAL", "REQUIRED", "Measurements", "check_pose_count", "read_measurements"]
+__all__ = ["OPTIONAL", "REQUIRED", "Measurements", "read_measurements"]

@@ -23,9 +23,21 @@ OFFSET_NAMES = ("rho1_offset", "rho2_offset", "rho3_offset", "theta1_offset", "t
 PARAMETERS = GEOMETRY_NAMES + OFFSET_NAMES
 ANGLE_PARAMETERS = ("theta1_offset", "theta2_offset")
 
-#: Typical size of each parameter's error, in its internal unit (mm, rad): the fit's variables
-#: are the parameters divided by these, so that a unit step means about the same to each.
-SCALE = np.array([1.0] * 12 + [0.1] * 3 + [1e-4] * 2)
+#: Typical size of each parameter's error, in its internal unit (mm, rad): 1 mm for the lengths
+#: and the slider zeros, 1 mrad (0.057 deg) for the table-angle zeros. The fit's variables are
+#: the parameters divided by these, and its prior toward the machine file has this standard
+#: deviation: it decides only what the measurements leave open.
+SCALE = np.array([1.0] * 15 + [1e-3] * 2)
+
+#: Each parameter in the shop's words (reports and messages).
+WORDS = {"D1_minus_d1": "leg I's x offset D1-d1", "D2_minus_d2": "legs II-III's x offset D2-d2",
+         "R1": "leg I's platform joint spacing R1", "r1": "leg I's slider joint spacing r1",
+         "L1": "leg I's rod length L1", "R2": "legs II-III's platform joint spacing R2",
+         "r4": "legs II-III's slider joint spacing r4", "L2": "leg II's rod length L2", "L3": "leg III's rod length L3",
+         "spindle_nose": "the spindle nose distance", "da": "the table height da",
+         "dt": "the table's distance dt from the tilt axis", "rho1_offset": "slider 1's zero",
+         "rho2_offset": "slider 2's zero", "rho3_offset": "slider 3's zero", "theta1_offset": "the tilt (A) zero",
+         "theta2_offset": "the rotary table's (C) zero"}
 
 #: Weight of a measured tool axis against a tip coordinate: an axis error of 1 rad counts as
 #: this many mm (10 um per 0.1 mrad, about what a tracker's 6-DOF probe resolves).
@@ -92,10 +104,12 @@ class Prediction:
     reachable: np.ndarray  # (N,) bool
 
 
-def predict(p: np.ndarray, joints: np.ndarray, tool_length: np.ndarray) -> Prediction:
-    """Tool tips (N, 3) mm and axes in the table frame at parameters ``p`` for readings (N, 5)."""
+def predict(p: np.ndarray, joints: np.ndarray, tool_length: np.ndarray, alpha_guess: np.ndarray | None = None
+            ) -> Prediction:
+    """Tool tips (N, 3) mm and axes in the table frame at parameters ``p`` for readings (N, 5);
+    ``alpha_guess`` (N,) rad, the platform's tilt at nearby parameters, makes it faster."""
     geom = geometry_of(p)
-    module = module_fk_working(geom, joints[:, :3])
+    module = module_fk_working(geom, joints[:, :3], alpha_guess)
     true = joints + np.r_[0.0, 0.0, 0.0, p[15:17]]
     tip, axis = tool_pose(geom, module.platform, module.alpha, true[:, 3], true[:, 4],
                           delta=geom.spindle_nose + tool_length)
@@ -180,5 +194,20 @@ def jacobian(p: np.ndarray, joints: np.ndarray, tool_length: np.ndarray, fk: Pre
     return d_tip, d_axis
 
 
-__all__ = ["ANGLE_PARAMETERS", "AXIS_LENGTH", "GEOMETRY_NAMES", "OFFSET_NAMES", "PARAMETERS", "SCALE", "Poses",
-           "Prediction", "geometry_of", "jacobian", "parameters_of", "predict", "to_interface", "unit"]
+__all__ = [
+    "ANGLE_PARAMETERS",
+    "AXIS_LENGTH",
+    "GEOMETRY_NAMES",
+    "OFFSET_NAMES",
+    "PARAMETERS",
+    "SCALE",
+    "WORDS",
+    "Poses",
+    "Prediction",
+    "geometry_of",
+    "jacobian",
+    "parameters_of",
+    "predict",
+    "to_interface",
+    "unit",
+]

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .fit import OUTLIER_Z, Calibration
+from .fit import OUTLIER_ALPHA, Calibration
 from .measurements import Measurements
 from .model import PARAMETERS, SCALE, to_interface, unit
 
@@ -21,13 +21,16 @@ def report_data(calibration: Calibration, measurements: Measurements, machine_so
     """Everything the report shows, as JSON-ready data (mm, degrees)."""
     c = calibration
     summary = c.summary()
+    open_names = {name for d in c.directions if d.weak for name in d.combination}
     parameters = []
     for k, name in enumerate(PARAMETERS):
         nominal, fitted = to_interface(name, c.nominal[k]), to_interface(name, c.fitted[k])
         std = to_interface(name, c.std[k]) if np.isfinite(c.std[k]) else None
         parameters.append({"name": name, "unit": unit(name), "status": c.status[name], "nominal": nominal,
                            "fitted": fitted, "change": fitted - nominal, "std": std,
-                           "reason": c.reasons.get(name)})
+                           "reason": "fixed by --fix" if c.status[name] == "fixed" else (
+                               "in a direction the measurements leave open (above): std mostly the prior's"
+                               if name in open_names else None)})
     poses = []
     for k, line in enumerate(measurements.lines):
         poses.append({"line": int(line), "tool_length": float(measurements.poses.tool_length[k]),
@@ -35,7 +38,7 @@ def report_data(calibration: Calibration, measurements: Measurements, machine_so
                       "residual_before": c.residual_before[k].tolist(), "residual_after": c.residual_after[k].tolist(),
                       "norm_before": float(np.linalg.norm(c.residual_before[k])),
                       "norm_after": float(np.linalg.norm(c.residual_after[k])),
-                      "robust_z": float(c.robust_z[k]), "outlier": bool(c.outlier[k]), "used": bool(c.used[k])})
+                      "score": float(c.score[k]), "outlier": bool(c.outlier[k]), "used": bool(c.used[k])})
     return {
         "measurements": measurements.source,
         "machine": machine_source,
@@ -43,13 +46,16 @@ def report_data(calibration: Calibration, measurements: Measurements, machine_so
         "poses_used": int(c.used.sum()),
         "rejected_lines": [int(x) for x in measurements.lines[~c.used]],
         "summary_mm": {**summary, "noise_estimate": c.sigma},
-        "fit": {"evaluations": c.evaluations, "message": c.message},
+        "fit": {"evaluations": c.evaluations, "message": c.message, "robust": c.robust},
+        "not_determined": c.notes,
         "parameters": parameters,
         "identifiability": [{"relative_singular_value": d.relative, "std_in_typical_errors": d.std,
-                             "combination": d.combination} for d in c.directions],
+                             "open": d.weak, "combination": d.combination} for d in c.directions],
         "typical_errors": {n: to_interface(n, float(SCALE[k])) for k, n in enumerate(PARAMETERS)},
-        "outlier_rule": f"residual norm above the median by more than {OUTLIER_Z:g} x 1.4826 x MAD of the norms",
-        "outliers": [{"line": p["line"], "norm_after": p["norm_after"], "robust_z": p["robust_z"],
+        "outlier_rule": (f"tip residual of the robust (soft-L1) fit, leverage corrected, above {c.threshold:.2f} noise "
+                         "standard deviations (the median pose sets the noise): a clean data set has a pose above it "
+                         f"with probability {OUTLIER_ALPHA:g}"),
+        "outliers": [{"line": p["line"], "norm_after": p["norm_after"], "score": p["score"],
                       "rejected": not p["used"]} for p in poses if p["outlier"]],
         "poses": poses,
     }
@@ -60,16 +66,19 @@ def _number(value: float | None, digits: int = 4) -> str:
 
 
 def _vector_plot(data: dict[str, Any], key: str, title: str, width: int = 460, height: int = 400) -> str:
-    """SVG: measured tips in the table's x-y plane with their residual vectors (one arrow scale
-    for both plots, printed under them)."""
+    """SVG: measured tips in the table's x-y plane with their residual vectors, the longest
+    arrow of this panel's unflagged poses 15 % of the plot (the scale is written on it)."""
     poses = data["poses"]
     xy = np.array([p["measured"][:2] for p in poses])
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     span = max(float(np.max(hi - lo)), 1.0)
     pad = 40.0
     scale_xy = (min(width, height) - 2 * pad) / span
-    longest = max(max(p["norm_before"] for p in poses), 1e-9)
-    arrow_scale = 0.15 * span / longest  # the longest before-vector is 15 % of the plot
+    # Scaled to the poses that do not stand out; an outlier's arrow is cut at twice the bar.
+    lengths = [float(np.hypot(*p[key][:2])) for p in poses]
+    typical = [length for length, p in zip(lengths, poses, strict=True) if not p["outlier"]] or lengths
+    longest = max(max(typical), 1e-9)
+    arrow_scale = 0.15 * span / longest
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" '
              f'viewBox="0 0 {width} {height}" role="img"><title>{html.escape(title)}</title>',
              f'<rect width="{width}" height="{height}" fill="#fff" stroke="#ccc"/>',
@@ -77,14 +86,19 @@ def _vector_plot(data: dict[str, Any], key: str, title: str, width: int = 460, h
     for p in poses:
         x0 = pad + (p["measured"][0] - lo[0]) * scale_xy
         y0 = height - pad - (p["measured"][1] - lo[1]) * scale_xy
-        dx, dy = p[key][0] * arrow_scale * scale_xy, p[key][1] * arrow_scale * scale_xy
+        cut = min(1.0, 2.0 * longest / max(float(np.hypot(*p[key][:2])), 1e-12))
+        dx, dy = (p[key][0] * cut * arrow_scale * scale_xy, p[key][1] * cut * arrow_scale * scale_xy)
         colour = "#c00" if p["outlier"] else ("#888" if not p["used"] else "#1f5fa8")
         parts.append(f'<circle cx="{x0:.1f}" cy="{y0:.1f}" r="2" fill="{colour}"><title>line {p["line"]}: '
                      f'{p[key.replace("residual", "norm")] * 1000:.1f} um</title></circle>')
         parts.append(f'<line x1="{x0:.1f}" y1="{y0:.1f}" x2="{x0 + dx:.1f}" y2="{y0 - dy:.1f}" stroke="{colour}" '
                      'stroke-width="1.2"/>')
-    parts.append(f'<text x="8" y="{height - 8}" font-size="11">table x (right), y (up); arrows: predicted - measured, '
-                 f'{longest * 1000:.0f} um drawn as {0.15 * span:.0f} mm</text></svg>')
+    bar = 0.15 * span * scale_xy
+    parts.append(f'<line x1="{width - 12 - bar:.1f}" y1="28" x2="{width - 12:.1f}" y2="28" stroke="#000" '
+                 f'stroke-width="2"/><text x="{width - 12:.1f}" y="44" font-size="11" text-anchor="end">'
+                 f'arrow scale: this bar = {longest * 1000:.3g} um</text>')
+    parts.append(f'<text x="8" y="{height - 8}" font-size="11">table x (right), y (up), mm; arrows: predicted - '
+                 'measured in x-y</text></svg>')
     return "".join(parts)
 
 
@@ -133,8 +147,12 @@ def report_html(data: dict[str, Any]) -> str:
         combination = ", ".join(f"{v:+.2f} {n}" for n, v in d["combination"].items())
         ident.append(f"<tr><td>{d['relative_singular_value']:.3g}</td><td>{_number(d['std_in_typical_errors'], 4)}"
                      f"</td><td>{html.escape(combination)}</td></tr>")
-    outliers = "".join(f"<li>line {o['line']}: {o['norm_after'] * 1000:.1f} um, robust z {o['robust_z']:.1f}"
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in data["not_determined"]) or "<li>nothing: every " \
+        "direction is determined by the measurements</li>"
+    outliers = "".join(f"<li>line {o['line']}: {o['norm_after'] * 1000:.1f} um, {o['score']:.1f} standard deviations"
                        f"{' (rejected)' if o['rejected'] else ''}</li>" for o in data["outliers"]) or "<li>none</li>"
+    robust = (" The values come from the robust (soft-L1) fit, which gives the flagged poses little weight."
+              if data["fit"]["robust"] else "")
     title = f"Calibration of {data['machine']} from {data['measurements']}"
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
@@ -145,15 +163,16 @@ td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}}td:last-child{{te
 <p>{data['poses_used']} of {data['poses_measured']} poses used. Tool-tip residual (predicted - measured, table frame):
 RMS {s['rms_before'] * 1000:.1f} um, max {s['max_before'] * 1000:.1f} um with the input machine file;
 RMS {s['rms_after'] * 1000:.2f} um, max {s['max_after'] * 1000:.2f} um calibrated
-(noise estimate {s['noise_estimate'] * 1000:.2f} um). {html.escape(data['fit']['message'])}</p>
+(noise estimate {s['noise_estimate'] * 1000:.2f} um).{robust} {html.escape(data['fit']['message'])}</p>
 <h2>Residual vectors</h2><div class="plots">{_vector_plot(data, 'residual_before', 'before')}
-{_vector_plot(data, 'residual_after', 'after (same arrow scale)')}</div>
+{_vector_plot(data, 'residual_after', 'after (its own arrow scale)')}</div>
 {_norm_bars(data)}
+<h2>What the measurements leave open</h2><ul>{notes}</ul>
 <h2>Parameters</h2><table><tr><th>name</th><th>unit</th><th>status</th><th>nominal</th><th>fitted</th>
-<th>change</th><th>std</th><th>why held</th></tr>{''.join(rows)}</table>
+<th>change</th><th>std</th><th>note</th></tr>{''.join(rows)}</table>
 <h2>Outliers</h2><p>{html.escape(data['outlier_rule'])}</p><ul>{outliers}</ul>
-<h2>Identifiability</h2><p>Singular directions of the scaled, column-normalised identification Jacobian, weakest
-last; std in typical errors (1 mm for lengths, 0.1 mm for slider zeros, 0.1 mrad for table angles).</p>
+<h2>Identifiability</h2><p>Singular directions of the scaled identification Jacobian, weakest last; std after the fit
+in typical errors (1 mm for lengths and slider zeros, 1 mrad for table angles: the prior toward the machine file).</p>
 <table><tr><th>relative singular value</th><th>std</th><th>combination</th></tr>{''.join(ident)}</table>
 </body></html>
 """

@@ -22,7 +22,7 @@ from ..api import (
 )
 from ..errors import InputError
 from ..kinematics import machine_ik_all, module_ik_all
-from ..machine import Machine, load_machine
+from ..machine import MAX_TOOL_LENGTH, Machine, load_machine
 from ..output.tables import read_table, write_table
 from .common import (
     COORDINATE,
@@ -154,6 +154,9 @@ def write_csv(table: dict[str, np.ndarray], output: str | None, formats: dict[st
 
 # ----------------------------------------------------------------------------- fk
 
+#: Columns of the calibration's measurement and plan files that ``fk`` reads past.
+MEASURED_COLUMNS = ("x", "y", "z", "i", "j", "k", "weight", "x_nominal", "y_nominal", "z_nominal")
+
 
 @main.command("fk")
 @click.argument("joints_file", metavar="JOINTS.csv", required=False, type=click.Path(dir_okay=False))
@@ -170,8 +173,10 @@ def fk_command(joints_file: str | None, output: str | None, rho: tuple[float, ..
                radians: bool) -> None:
     """Forward kinematics: sliders (and table angles) to platform pose (and tool pose), JSON.
 
-    With JOINTS.csv (header rho1,rho2,rho3,theta1,theta2): output columns
-    x,y,z,i,j,k,alpha,status (tool tip mm and axis in the table frame).
+    With JOINTS.csv (header rho1,rho2,rho3,theta1,theta2[,tool_length]): output columns
+    x,y,z,i,j,k,alpha,status (tool tip mm and axis in the table frame). A tool_length column
+    (mm) sets each row's tool (--tool-length where its cell is empty); the other columns of a
+    calibration's measurement or plan file are read past, so 'fk MEASURED.csv' predicts them.
     """
     machine = load_machine(machine_path)
     scale = angle_scale(radians)
@@ -203,11 +208,20 @@ def fk_command(joints_file: str | None, output: str | None, rho: tuple[float, ..
 
 def _fk_batch(machine: Machine, path: str, output: str | None, tool_length: float, scale: float) -> None:
     check_outputs(path, output)
-    columns, _ = read_table(path, JOINT_NAMES)
+    notes: list[str] = []
+    columns, lines = read_table(path, JOINT_NAMES, ("tool_length", *MEASURED_COLUMNS), notes)
+    for note in notes:
+        click.echo(note, err=True)
     joints = np.column_stack([columns[c] for c in JOINT_NAMES])
     joints[:, 3:] /= scale
-    fk = forward_kinematics(machine, joints, tool_length=tool_length)
-    found = pose_margins(machine, joints, fk.platform, fk.alpha, fk.reachable, tool_length)
+    tool = columns.get("tool_length", np.full(len(joints), np.nan))
+    tool = np.where(np.isnan(tool), tool_length, tool)
+    bad = np.flatnonzero((tool < 0) | (tool > MAX_TOOL_LENGTH))
+    if bad.size:
+        raise InputError(f"tool_length = {tool[bad[0]]:g} mm is outside 0 to {MAX_TOOL_LENGTH:g} mm", path,
+                         int(lines[bad[0]]))
+    fk = forward_kinematics(machine, joints, tool_length=tool)
+    found = pose_margins(machine, joints, fk.platform, fk.alpha, fk.reachable, tool)
     status = classify(machine, joints, fk.reachable, found)
     labels = np.array([Status(s).label for s in range(len(Status))])[status]
     table = {"x": fk.tip[:, 0], "y": fk.tip[:, 1], "z": fk.tip[:, 2], "i": fk.axis[:, 0], "j": fk.axis[:, 1],

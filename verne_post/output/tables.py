@@ -14,20 +14,30 @@ from ..errors import InputError
 from .atomic import atomic_write
 
 
-def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: Sequence[str] = ()
-               ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+def read_table(path: str | os.PathLike[str], required: Sequence[str], optional: Sequence[str] = (),
+               notes: list[str] | None = None) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """Columns (name -> float array) and the 1-based file line of each row.
 
     The header names every ``required`` column and any of the ``optional`` ones, in any order;
     case and surrounding spaces are ignored. Every cell is a finite number; an optional
     column's cell may be empty (NaN). Blank lines and lines starting with ``#`` are skipped.
+    As spreadsheets write CSV: a UTF-8 byte-order mark is skipped, and a header separated by
+    ``;`` makes the file ``;``-separated with ``,`` as the decimal point (said in ``notes``).
     """
     source = str(path)
     try:
-        with open(path, encoding="utf-8", newline="") as handle:
-            rows = list(csv.reader(handle))
+        with open(path, encoding="utf-8-sig", newline="") as handle:
+            text = handle.read()
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read: {exc}", source) from None
+    lines_of_text = text.splitlines()
+    header_text = next((t for t in lines_of_text if t.strip() and not t.lstrip().startswith("#")), "")
+    semicolons = ";" in header_text
+    rows = list(csv.reader(lines_of_text, delimiter=";" if semicolons else ","))
+    if semicolons:
+        rows = [[cell.replace(",", ".") for cell in row] for row in rows]
+        if notes is not None:
+            notes.append(f"{source}: read as ';'-separated with ',' as the decimal point (a spreadsheet's CSV)")
     expected = ",".join(required) + "".join(f"[,{c}]" for c in optional)
     numbered = [(k + 1, [cell.strip() for cell in row]) for k, row in enumerate(rows)
                 if any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
