@@ -525,3 +525,44 @@ def test_the_shipped_file_comments_out_the_linuxcnc_values(tmp_path: Path) -> No
     from verne_post.cli.machine import controller_keys
 
     assert "\n" + controller_keys("linuxcnc") + "\n\nsafe:" in SHIPPED.read_text()
+
+
+# An NX tool given by its data alone (TLDATA, no LOAD/TOOL: as in ../shared/cl-samples/nx_zlevel_coremill_mm.cls)
+UNNUMBERED_CL = """TOOL PATH/ZLEVEL,TOOL,MILL_10
+TLDATA/MILL,10.0000,0.0000,75.0000,0.0000,0.0000
+MSYS/0.0000,0.0000,0.0000,1.0000000,0.0000000,0.0000000,0.0000000,1.0000000,0.0000000
+FEDRAT/MMPM,500.0000
+RAPID
+GOTO/0.0000,0.0000,20.0000,0.0000000,0.0000000,1.0000000
+GOTO/0.0000,0.0000,0.0000
+GOTO/30.0000,0.0000,0.0000
+"""
+
+
+def _post_unnumbered(tmp_path: Path, controller: str) -> tuple[vp.Machine, list[str]]:
+    cl = tmp_path / "nx.cls"
+    cl.write_text(UNNUMBERED_CL)
+    machine = vp.load_machine(_machine_file(tmp_path, controller))
+    target = tmp_path / "nx.mpf"
+    posted = post(cl, machine, PostOptions(), target)
+    assert not posted.violations and posted.verification is not None and posted.verification.ok
+    return machine, target.read_text().splitlines()
+
+
+def test_a_tool_without_a_number_is_loaded_by_hand_with_the_profiles_other_tool_change_words(tmp_path: Path) -> None:
+    """SINUMERIK: D0 still cancels the cutting edge that stays active from the tool before (the
+    joints hold the tool); no T and no M6, which would change to a tool no one named."""
+    _, lines = _post_unnumbered(tmp_path, "  dialect: sinumerik\n")
+    k = next(k for k, line in enumerate(lines) if line.startswith("; TOOL 0 LENGTH 75.0000"))
+    assert lines[k + 1] == "D0"
+    assert not any(re.fullmatch(r"T\d+|M6", line) for line in lines)
+    assert any("LOAD THE TOOL BY HAND" in line for line in lines)
+
+
+def test_a_tool_without_a_number_gets_the_machine_files_tool_number(tmp_path: Path) -> None:
+    machine, lines = _post_unnumbered(tmp_path, "  dialect: sinumerik\n  tool_number: 7\n")
+    k = next(k for k, line in enumerate(lines) if line.startswith("; TOOL 7 LENGTH 75.0000"))
+    assert lines[k + 1:k + 4] == ["T7", "M6", "D0"]
+    assert not any("BY HAND" in line or "TOOL 0" in line for line in lines)
+    program = read_gcode("\n".join(lines) + "\n", controller=machine.controller.profile())
+    assert set(program.tool[~np.isnan(program.joints).all(axis=1)][1:]) == {7}

@@ -309,6 +309,9 @@ class ControllerConfig(BaseModel):
     """An optional stop (M1) before every tool change but the first."""
     max_line_length: Annotated[int, Field(ge=60, le=100_000)] | None = None
     """Characters per line (default: the dialect's; 252 for LinuxCNC). Comments are shortened to fit."""
+    tool_number: Annotated[int, Field(ge=1, le=10**9)] | None = None
+    """The number of a CL tool without one (NX's TLDATA without LOAD/TOOL): its tool change is written
+    with it (absent: the tool is loaded by hand; the tool_change lines are written without T and M6)."""
     split: Literal["tool"] | None = None
     """tool: one program file per tool, part_1_T2.nc, part_2_T5.nc, ... (each starts where the one before ends)."""
     m_codes: MCodesConfig = MCodesConfig()

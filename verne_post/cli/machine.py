@@ -109,6 +109,7 @@ def controller_keys(dialect: str) -> str:
         f"  # tool_change: {flow(preset.tool_change_lines)}   # {{tool}} {{length}} {{delta}} (mm) {{spindle}} (rpm) "
         "{name} {program}",
         f"  # program_end: {flow(preset.end_lines)}",
+        "  # tool_number: 1                  # a CL tool without a number (NX TLDATA alone); absent: by hand",
         "  # block_numbers: {start: 10, step: 10}",
         "  # optional_stop: true             # M1 before every tool change but the first",
         f"  # max_line_length: {preset.max_line_length}",

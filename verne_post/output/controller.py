@@ -165,6 +165,24 @@ class Controller:
     def tool_change_lines(self) -> tuple[str, ...]:
         return self.tool_change if self.tool_change is not None else (f"T{{tool}} M{self.m_codes.tool_change}",)
 
+    @property
+    def hand_loaded_lines(self) -> tuple[str, ...]:
+        """The tool-change lines for a tool without a number, loaded by hand: without the words
+        that hold ``{tool}`` or the tool-change M code, and without comments but whole comment
+        lines free of ``{tool}`` (what is left, SINUMERIK's ``D0``, still puts the controller in
+        the state the program needs)."""
+        change = re.compile(rf"M0*{self.m_codes.tool_change}", re.IGNORECASE)
+        lines = []
+        for line in self.tool_change_lines:
+            if self.is_comment(line):
+                kept = "" if "tool" in placeholders(line) else line
+            else:
+                code = re.sub(r"\([^()]*\)|;.*", " ", line)  # a comment of the line, perhaps of {tool}
+                kept = " ".join(word for word in code.split() if "{tool" not in word and not change.fullmatch(word))
+            if kept:
+                lines.append(kept)
+        return tuple(lines)
+
     def is_comment(self, line: str) -> bool:
         """Whether ``line`` is a comment and nothing else, as this controller reads it (no block number)."""
         text = line.strip()

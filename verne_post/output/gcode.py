@@ -260,13 +260,14 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat, values: dict[
             raise ValueError(f"{where}: tool {tool} length {length} / Delta {delta} is not finite")
         dec = fmt.linear_decimals
         note = (_comment(f"TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)}", controller), False)
-        # Tool 0: the CL file gave tool data but no tool number; T0 M6 would unload the spindle.
-        if tool == 0:
-            return [note]
-        stop = [] if first_tool or not controller.optional_stop else [(f"M{m.optional_stop}", True)]
         spindle = (program.tool_spindle or {}).get(event.line, 0.0)
         here = {**values, "tool": tool, "length": Number(length, dec), "delta": Number(delta, dec),
                 "spindle": Number(spindle, None)}
+        # Tool 0: the CL file gave tool data but no tool number (and the machine file none:
+        # controller.tool_number); T0 M6 would unload the spindle, so it is loaded by hand.
+        if tool == 0:
+            return [note, *_lines(controller.hand_loaded_lines, here, controller, where)]
+        stop = [] if first_tool or not controller.optional_stop else [(f"M{m.optional_stop}", True)]
         return [*stop, note, *_lines(controller.tool_change_lines, here, controller, where)]
     if isinstance(event, Spindle):
         if event.direction == "OFF":
