@@ -127,8 +127,8 @@ def controller_keys(dialect: str) -> str:
               help="Also draw the workspace sections: PNG, or SVG when it ends in .svg (needs matplotlib).")
 @user_errors
 def machine_show_command(machine_file: str, tool_length: float, output: str | None) -> None:
-    """What to know before the first run: joint ranges, the reference pose, the workspace for a tool
-    (axis along the table normal) and the tightest singularity margins in it."""
+    """What to know before the first run: joint ranges (with their letters), the reference pose, the
+    workspace for a tool above the table (axis along the table normal) and the limits at its edges."""
     from ..placement.machine_facts import facts, facts_table
 
     machine = load_machine(machine_file)
