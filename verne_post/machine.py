@@ -659,6 +659,7 @@ class _Document:
 
 
 def _document(root: yaml.Node, data: object) -> _Document:
+    """The :class:`_Document` of the node tree ``root`` and the ``data`` constructed from it."""
     lines: dict[tuple[str, ...], int] = {}
     quoted = []
     stack: list[tuple[tuple[str, ...], yaml.Node]] = [((), root)]
