@@ -199,6 +199,8 @@ def _check(text: str, tmp_path: Path) -> list[str]:
     # a union (false, true or {start, step}): one line at the file's key, no model names
     ("  dialect: linuxcnc\n", "  dialect: linuxcnc\n  block_numbers: {step: ten}\n", "  block_numbers:",
      "controller.block_numbers.step: 'ten' is not a whole number"),
+    ("  dialect: linuxcnc\n", "  dialect: linuxcnc\n  block_numbers: ten\n", "  block_numbers:",
+     "controller.block_numbers: 'ten' is not a mapping of keys or true or false"),
     # YAML notices these a line late: reported where they are written
     ("  R1: 129.71", "  R1:129.71", "  R1:", "invalid YAML: could not find expected ':': write a key as 'key: value', "
      "with a space after the colon"),

@@ -88,7 +88,16 @@ def collapse_alternatives(problems: list[tuple[tuple[str, ...], bool, str]]) -> 
         texts = kept.setdefault(path, [])
         if text not in texts:
             texts.append(text)
-    return [(path, "; or ".join(texts)) for path, texts in kept.items()]
+    return [(path, _either(texts)) for path, texts in kept.items()]
+
+
+def _either(texts: list[str]) -> str:
+    """Reasons of one key, joined: "'ten' is not a mapping of keys or true or false" where they
+    all say what one value is not."""
+    first = texts[0].split(" is not ", 1)[0]
+    if len(texts) > 1 and all(text.startswith(f"{first} is not ") and "; " not in text for text in texts):
+        return f"{first} is not " + " or ".join(text.removeprefix(f"{first} is not ") for text in texts)
+    return "; or ".join(texts)
 
 
 def near_key(model: type[BaseModel], path: tuple[str, ...]) -> str | None:
