@@ -9,6 +9,7 @@ tools and spindle speeds, the vendor manuals' syntax (see ``verne_post/output/co
 from __future__ import annotations
 
 import itertools
+import json
 import re
 from pathlib import Path
 
@@ -120,10 +121,10 @@ def test_a_profile_with_other_letters_comments_lines_and_numbers_is_followed_and
     assert not any(re.search(r"(?<![A-Z])[XYZA]-?\d", c) for c in codes)
     # the tool changes: T M6, then the Delta of the machine file's geometry for that tool
     nose = machine.geometry.spindle_nose
-    changes = [(k, int(m.group(1))) for k, b in enumerate(blocks) if (m := re.fullmatch(r"N\d+ T(\d+) M6", b))]
+    changes = [(k, int(m.group(1))) for k, b in enumerate(body) if (m := re.fullmatch(r"N\d+ T(\d+) M6", b))]
     assert [tool for _, tool in changes] == list(TOOLS)
-    for k, tool in changes:
-        assert blocks[k + 1].split(" ", 1)[1] == f"; DELTA {nose + TOOLS[tool]:.4f} MM FOR TOOL {tool}"
+    for k, tool in changes:  # a comment line of the profile: no block number (docs/controllers.md)
+        assert body[k + 1] == f"; DELTA {nose + TOOLS[tool]:.4f} MM FOR TOOL {tool}"
     # moves between cuts carry the mark in the profile's style
     assert any(b.endswith(" ; RAPID") for b in blocks) and "(RAPID)" not in text
     # verify reads it with the profile, and certifies it against the CL path
@@ -318,7 +319,26 @@ def _problem(tmp_path: Path, controller: str) -> str:
      "verify could not read 'G91' back: G91 is not supported"),
     ("  dialect: sinumerik\n  program_start: [\"(HELLO)\"]\n", 1, "controller.program_start.0",
      "parentheses are not a comment on sinumerik"),
-    ("  dialect: linuxcnc\n  axes: {rho1: U, rho2: U}\n", 1, "controller.axes", "two joints share a letter"),
+    ("  dialect: linuxcnc\n  axes: {rho1: U, rho2: U}\n", 1, "controller.axes.rho2", "U is the letter of rho1 too"),
+    ("  dialect: linuxcnc\n  axes: {theta1: X}\n", 1, "controller.axes.theta1", "X is the letter of rho1 too"),
+    # inch input (SINUMERIK "NC programming" 12/2019: G70 inch, G71 metric; LinuxCNC and FANUC: G20)
+    ("  dialect: sinumerik\n  program_start: [\"G17 G70 G90\"]\n", 1, "controller.program_start.0",
+     "G70 selects inch input"),
+    ("  dialect: linuxcnc\n  tool_change: [\"T{tool} M6\", \"G20\"]\n", 1, "controller.tool_change.1",
+     "G20 selects inch input"),
+    # work offsets: G54 to G59 (LinuxCNC, FANUC), G500 and G505 to G599 (SINUMERIK settable frames)
+    ("  dialect: linuxcnc\n  program_start: [\"G21 G90 G54\"]\n", 1, "controller.program_start.0",
+     "G54 selects a work offset"),
+    ("  dialect: fanuc\n  program_start: [\"G21 G90 G54.1 P1\"]\n", 1, "controller.program_start.0",
+     "G54.1 selects a work offset"),
+    ("  dialect: sinumerik\n  program_start: [\"TRAFOOF\", \"G71 G90 G500\"]\n", 1, "controller.program_start.1",
+     "G500 selects a work offset"),
+    ("  dialect: sinumerik\n  program_start: [\"G505\"]\n", 1, "controller.program_start.0",
+     "G505 selects a work offset"),
+    # a comment style the dialect does not read: at the key, not at the program's first line
+    ("  dialect: sinumerik\n  comment: parentheses\n", 1, "controller.comment",
+     "sinumerik does not read parentheses as a comment"),
+    ("  dialect: fanuc\n  comment: semicolon\n", 1, "controller.comment", "fanuc does not read semicolon"),
     ("  dialect: linuxcnc\n  axes: {rho1: Q}\n", 1, "controller.axes.rho1", "Input should be"),
     ("  dialect: haas\n", 0, "controller.dialect", "Input should be 'linuxcnc', 'fanuc' or 'sinumerik'"),
     ("  dialect: linuxcnc\n  tool_change: [\"T{tool M6\"]\n", 1, "controller.tool_change.0", "malformed placeholder"),
@@ -421,3 +441,128 @@ def test_fanuc_feeds_and_block_numbers_stay_within_its_ranges(tmp_path: Path) ->
 ])
 def test_fanuc_ranges_are_checked_when_the_file_is_read(tmp_path: Path, controller: str, reason: str) -> None:
     assert reason in _problem(tmp_path, controller)
+
+
+def test_a_program_under_a_work_offset_is_refused_by_verify() -> None:
+    """A joint-space program's words are the joints' positions: a work offset would shift them
+    (G54..G59 and FANUC's G54.1; SINUMERIK's settable frames G54..G57, G500, G505..G599)."""
+    move = "G0 X100 Y47 Z46 A0 C0\n"
+    for dialect, program, code in [("linuxcnc", "G21 G90\nG54\n", "G54"), ("linuxcnc", "G21 G55\n", "G55"),
+                                   ("fanuc", "O1\nG21\nG54.1 P2\n", "G54.1"),
+                                   ("sinumerik", "TRAFOOF\nG71\nG500\n", "G500"),
+                                   ("sinumerik", "G71 G54\n", "G54")]:
+        with pytest.raises(InputError, match=rf"G{code[1:]} selects a work offset"):
+            read_gcode(program + move + "M30\n", controller=DIALECTS[dialect])
+
+
+def test_check_lists_a_wrong_key_and_the_joints_that_share_a_letter(tmp_path: Path) -> None:
+    """The controller section's own checks run although another of its keys is wrong."""
+    stderr = _problem(tmp_path, "  dialect: linuxcnc\n  coment: semicolon\n"
+                                "  axes: {rho1: U, rho2: V, rho3: W, theta1: W, theta2: C}\n")
+    keys = re.findall(r":\d+: ([\w.]+): (.*)", stderr)
+    assert [key for key, _ in keys] == ["controller.coment", "controller.axes.theta1"], stderr
+    assert "did you mean comment?" in keys[0][1] and "W is the letter of rho3 too" in keys[1][1]
+
+
+@pytest.mark.parametrize(("controller", "missing"), [
+    ("  dialect: sinumerik\n  program_start: [\"G17 G71 G90\"]\n", "TRAFOOF G40 G94"),
+    ("  dialect: fanuc\n  program_start: [\"G21 G90 G17 G40 G49 G94\"]\n", "G80"),
+    ("  dialect: linuxcnc\n  program_start: [\"G21 G90 G17 G40 G94\"]\n", "G49 G64"),
+])
+def test_a_start_that_leaves_out_the_dialects_modes_is_warned_at_its_line(tmp_path: Path, controller: str,
+                                                                          missing: str) -> None:
+    """docs/controllers.md: TRAFOOF, G40, G49, G80 and G94 put the controller in the modes the
+    program is written for; an override without them leaves whatever mode the machine was in."""
+    path = _machine_file(tmp_path, controller)
+    text = path.read_text()
+    line = text.splitlines().index(controller.splitlines()[1]) + 1
+    result = CliRunner().invoke(main, ["machine", "check", str(path)])
+    assert result.exit_code == 0
+    assert f"verne-post: warning: {path}:{line}: controller.program_start: leaves out {missing} of the" in result.stderr
+    machine = vp.load_machine(path)
+    assert machine.warnings and f":{line}: controller.program_start" in machine.warnings[0]
+    # the post says it too
+    cl = tmp_path / "part.cls"
+    cl.write_text(TOOLS_CL)
+    posted = CliRunner().invoke(main, ["check", str(cl), "--machine", str(path)])
+    assert f"warning: {path}:{line}: controller.program_start: leaves out {missing}" in posted.stderr
+
+
+def test_a_start_with_the_dialects_modes_in_another_order_is_not_warned(tmp_path: Path) -> None:
+    path = _machine_file(tmp_path, "  dialect: sinumerik\n  program_start: [\"G710 G40 G90\", \"TRAFOOF\", "
+                                   "\"G94 G17\", \"M11 ; table unclamped\"]\n")
+    assert vp.load_machine(path).warnings == ()
+
+
+def test_init_comments_out_the_dialects_own_values_and_writes_the_schema_it_names(tmp_path: Path) -> None:
+    for dialect, preset in DIALECTS.items():
+        out = tmp_path / dialect / "shop.yaml"
+        out.parent.mkdir()
+        result = CliRunner().invoke(main, ["machine", "init", "-o", str(out), "--dialect", dialect])
+        assert result.exit_code == 0
+        text = out.read_text()
+        # the editor's schema, named by the first line, beside the file, and the model's own
+        named = re.match(r"# yaml-language-server: \$schema=(\S+)\n", text).group(1)
+        assert json.loads((out.parent / named).read_text()) == schema()
+        # every key the dialect sets, uncommented, gives the dialect's value
+        keys = ("axes", "comment", "program_start", "tool_change", "program_end", "max_line_length", "m_codes")
+        uncommented = re.sub(rf"(?m)^  # ({'|'.join(keys)}):", r"  \1:", text)
+        uncommented = re.sub(r"(?m)^  #( +coolant_through)", r"  \1", uncommented)
+        assert uncommented != text
+        (tmp_path / "u.yaml").write_text(uncommented)
+        profile = vp.load_machine(tmp_path / "u.yaml").controller.profile()
+        for key in ("axes", "comment", "program_start", "tool_change_lines", "end_lines", "max_line_length",
+                    "m_codes"):
+            assert getattr(profile, key) == getattr(preset, key), (dialect, key)
+    # a schema there already is kept
+    kept = tmp_path / "linuxcnc" / "verne.schema.json"
+    kept.write_text("{}")
+    assert CliRunner().invoke(main, ["machine", "init", "-o", str(kept.parent / "b.yaml")]).exit_code == 0
+    assert kept.read_text() == "{}"
+
+
+def test_the_shipped_file_comments_out_the_linuxcnc_values(tmp_path: Path) -> None:
+    from verne_post.cli.machine import controller_keys
+
+    assert "\n" + controller_keys("linuxcnc") + "\n\nsafe:" in SHIPPED.read_text()
+
+
+# An NX tool given by its data alone (TLDATA, no LOAD/TOOL: as in ../shared/cl-samples/nx_zlevel_coremill_mm.cls)
+UNNUMBERED_CL = """TOOL PATH/ZLEVEL,TOOL,MILL_10
+TLDATA/MILL,10.0000,0.0000,75.0000,0.0000,0.0000
+MSYS/0.0000,0.0000,0.0000,1.0000000,0.0000000,0.0000000,0.0000000,1.0000000,0.0000000
+FEDRAT/MMPM,500.0000
+RAPID
+GOTO/0.0000,0.0000,20.0000,0.0000000,0.0000000,1.0000000
+GOTO/0.0000,0.0000,0.0000
+GOTO/30.0000,0.0000,0.0000
+"""
+
+
+def _post_unnumbered(tmp_path: Path, controller: str) -> tuple[vp.Machine, list[str]]:
+    cl = tmp_path / "nx.cls"
+    cl.write_text(UNNUMBERED_CL)
+    machine = vp.load_machine(_machine_file(tmp_path, controller))
+    target = tmp_path / "nx.mpf"
+    posted = post(cl, machine, PostOptions(), target)
+    assert not posted.violations and posted.verification is not None and posted.verification.ok
+    return machine, target.read_text().splitlines()
+
+
+def test_a_tool_without_a_number_is_loaded_by_hand_with_the_profiles_other_tool_change_words(tmp_path: Path) -> None:
+    """SINUMERIK: D0 still cancels the cutting edge that stays active from the tool before (the
+    joints hold the tool); no T and no M6, which would change to a tool no one named."""
+    _, lines = _post_unnumbered(tmp_path, "  dialect: sinumerik\n")
+    k = next(k for k, line in enumerate(lines) if line.startswith("; TOOL 0 LENGTH 75.0000"))
+    assert lines[k + 1] == "D0"
+    assert not any(re.fullmatch(r"T\d+|M6", line) for line in lines)
+    assert any("LOAD THE TOOL BY HAND" in line for line in lines)
+
+
+def test_a_tool_without_a_number_gets_the_machine_files_tool_number(tmp_path: Path) -> None:
+    machine, lines = _post_unnumbered(tmp_path, "  dialect: sinumerik\n  tool_number: 7\n")
+    k = next(k for k, line in enumerate(lines) if line.startswith("; TOOL 7 LENGTH 75.0000"))
+    assert lines[k + 1:k + 4] == ["T7", "M6", "D0"]
+    assert not any("BY HAND" in line or "TOOL 0" in line for line in lines)
+    program = read_gcode("\n".join(lines) + "\n", controller=machine.controller.profile())
+    assert set(program.tool[~np.isnan(program.joints).all(axis=1)][1:]) == {7}

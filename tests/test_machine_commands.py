@@ -37,16 +37,14 @@ def test_check_lists_every_problem_at_its_line_and_exits_2(tmp_path: Path) -> No
     assert result.exit_code == 2
     r1, theta1, tool = _lines_of(broken, "  R1:", "  theta1:", "  1: {length")
     assert result.stderr.splitlines() == [
-        f"verne-post: error: {path}:{r1}: geometry.R1: Input should be a valid number, unable to parse string as a "
-        f"number",
+        f"verne-post: error: {path}:{r1}: geometry.R1: '12x9.71' is not a number",
         f"verne-post: error: {path}:{theta1}: joints.theta1: min (95.0) must be smaller than max (90.0)",
         f"verne-post: error: {path}:{tool}: tools.1.length: Input should be greater than or equal to 0"]
     # loading it anywhere else gives the first, the same way
     posted = CliRunner().invoke(main, [str(ROOT / "examples" / "nx_swarf_inch_crlf.cls"), "--machine", str(path),
                                        "-o", str(tmp_path / "x.nc")])
     assert posted.exit_code == 2
-    assert posted.stderr.strip() == f"verne-post: error: {path}:{r1}: geometry.R1: Input should be a valid number, " \
-                                    f"unable to parse string as a number"
+    assert posted.stderr.strip() == f"verne-post: error: {path}:{r1}: geometry.R1: '12x9.71' is not a number"
 
 
 def test_check_summarises_a_valid_file_with_its_reference_pose(tmp_path: Path) -> None:
@@ -115,10 +113,9 @@ def test_show_gives_a_workspace_whose_edges_are_where_the_machine_stops(tmp_path
     z = np.arange(z0, z1 + 1.0, 1.0)
     column = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
     assert usable(column).mean() > 0.5
-    beyond = np.array([[0.0, 0.0, z1 + 15.0], [0.0, 0.0, z0 - 15.0]])  # past the 10 mm grid
-    assert not usable(beyond).any()
-    margins = found.margins
-    assert margins["serial"] >= machine.singularity.serial_min and margins["rod_clearance"] >= 10.0
+    assert not usable(np.array([[0.0, 0.0, z1 + 15.0]])).any()  # past the 10 mm grid
+    # above the table only: the tool tip below its face (z < 0) is no place to cut
+    assert z0 == 0.0 and f"z: 0 to {z1:.0f} mm" in result.output and usable(np.array([[0.0, 0.0, -100.0]])).all()
     ref = reference_joints(machine)
     assert f"{ref[0]:.3f}" in result.output
 
@@ -143,3 +140,49 @@ def test_a_file_changed_only_in_comments_and_order_posts_the_same_program(tmp_pa
         assert result.exit_code == 0, result.output
         programs.append(out.read_bytes())
     assert programs[0] == programs[1]
+
+
+def test_show_names_each_edge_where_it_is_set_and_the_joints_by_their_letters(tmp_path: Path) -> None:
+    """Each limit said to set an edge is met there: the tip is usable and a tip one grid step
+    (10 mm) beside it, in its section, is not (the machine's own IK status)."""
+    machine = vp.load_machine()
+    found = facts(machine, 100.0)
+    assert len(found.edges) >= 3
+    up = np.array([0.0, 0.0, 1.0])
+    for label, tip in found.edges:
+        tip = np.array(tip)
+        steps = np.array([[10, 0, 0], [-10, 0, 0], [0, 10, 0], [0, -10, 0], [0, 0, 10], [0, 0, -10]], float)
+        near = np.vstack([tip, tip + steps])
+        ik = inverse_kinematics_pair(machine, near, np.tile(up, (len(near), 1)), 1, tool_length=100.0)
+        assert ik.status[0] == Status.OK and (ik.status[1:] != Status.OK).any(), label
+        assert tip[2] >= 0
+    path = tmp_path / "uvw.yaml"
+    path.write_text(SHIPPED.read_text().replace(
+        "  dialect: linuxcnc\n", "  dialect: sinumerik\n  axes: {rho1: U, rho2: V, rho3: W, theta1: B, theta2: C}\n"))
+    result = CliRunner().invoke(main, ["machine", "show", str(path), "--tool-length", "100"])
+    assert result.exit_code == 0
+    for joint, letter in zip(("rho1", "rho2", "rho3", "theta1", "theta2"), "UVWBC", strict=True):
+        assert re.search(rf"^{joint} \({letter}\) (mm|deg) ", result.output, re.MULTILINE), result.output
+    edges = result.output.split("its edges are set by:\n")[1]
+    assert f"  {found.edges[0][0]}: at " in edges and "tightest margins" not in result.output
+
+
+def test_the_maps_labels_stay_in_their_section_and_clear_of_each_other() -> None:
+    import itertools
+
+    import matplotlib.pyplot as plt
+
+    from verne_post.placement.workspace import workspace, workspace_figure
+
+    for tool_length, tilt in ((100.0, 0.0), (60.0, 30.0)):
+        figure = workspace_figure(workspace(vp.load_machine(), tool_length=tool_length, tilt=tilt, step=10.0))
+        figure.canvas.draw()
+        renderer = figure.canvas.get_renderer()
+        for ax in figure.axes[:3]:
+            frame = ax.get_window_extent(renderer)
+            boxes = [text.get_window_extent(renderer) for text in ax.texts]
+            assert boxes
+            for box in boxes:
+                assert frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0 and box.y1 <= frame.y1
+            assert not any(a.overlaps(b) for a, b in itertools.combinations(boxes, 2))
+        plt.close(figure)

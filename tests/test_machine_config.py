@@ -52,7 +52,7 @@ def test_tool_length_changes_delta() -> None:
         (lambda d: d["geometry"].pop("L1"), "geometry.L1: missing (required)"),
         (lambda d: d["geometry"].update(L2=-5), "geometry.L2: Input should be greater than 0"),
         (lambda d: d["joints"]["rho1"].update(min=1400), "joints.rho1: min (1400.0) must be smaller"),
-        (lambda d: d["joints"]["theta1"].update(velocity="fast"), "joints.theta1.velocity: Input should be a valid"),
+        (lambda d: d["joints"]["theta1"].update(velocity="fast"), "joints.theta1.velocity: 'fast' is not a number"),
         (lambda d: d["geometry"].update(dt=float("nan")), "geometry.dt: Input should be a finite number"),
         (lambda d: d["joints"]["rho2"].update(continuous=True), "joints.rho2"),
         (lambda d: d.update(source="other.yaml"), "source: unknown key"),
@@ -169,3 +169,71 @@ def test_unreachable_reference_pose_is_rejected_with_the_reason(tmp_path: Path) 
         vp.load_machine(_write(tmp_path, data))
     assert "geometry: the reference pose" in str(error.value)
     assert "not reachable in the working mode: no assembly of the legs reaches it" in str(error.value)
+
+
+# -------------------------------------------------------------------------------------------
+# messages in the file's own terms: at the line where the mistake is written, the value echoed
+
+
+def _check(text: str, tmp_path: Path) -> list[str]:
+    """``machine check``'s error lines for a machine file of ``text``, without the file's name."""
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    result = CliRunner().invoke(main, ["machine", "check", str(path)])
+    assert result.exit_code == 2, result.output
+    return [line.removeprefix(f"verne-post: error: {path}:") for line in result.stderr.splitlines()]
+
+
+@pytest.mark.parametrize(("old", "new", "line", "message"), [
+    # a misspelt key: the nearest of that section's keys (difflib, as click does for options)
+    ("  dialect: linuxcnc\n", "  dialect: linuxcnc\n  block_number: true\n", "  block_number:",
+     "controller.block_number: unknown key (did you mean block_numbers?)"),
+    ("  1: {length: 76.2}", "  1: {length: 76.2, diamter: 6}", "  1: {length",
+     "tools.1.diamter: unknown key (did you mean diameter?)"),
+    # a decimal comma: the value echoed, the decimal point suggested
+    ("  L1: 849.97", "  L1: 849,97", "  L1:", "geometry.L1: '849,97' is not a number: write a decimal point (849.97)"),
+    # a union (false, true or {start, step}): one line at the file's key, no model names
+    ("  dialect: linuxcnc\n", "  dialect: linuxcnc\n  block_numbers: {step: ten}\n", "  block_numbers:",
+     "controller.block_numbers.step: 'ten' is not a whole number"),
+    ("  dialect: linuxcnc\n", "  dialect: linuxcnc\n  block_numbers: ten\n", "  block_numbers:",
+     "controller.block_numbers: 'ten' is not a mapping of keys or true or false"),
+    # YAML notices these a line late: reported where they are written
+    ("  R1: 129.71", "  R1:129.71", "  R1:", "invalid YAML: could not find expected ':': write a key as 'key: value', "
+     "with a space after the colon"),
+    ("jerk: 200000.0}\n  rho2:", "jerk: 200000.0\n  rho2:", "  rho1:",
+     "invalid YAML: the '{' of this line is not closed by a '}'"),
+    ("  R1: 129.71", "\tR1: 129.71", "\tR1:", "invalid YAML: a tab character: indent with spaces"),
+    # a number in quotes: the schema (an editor) refuses it, so the program does too
+    ("  R1: 129.71", '  R1: "129.71"', "  R1:", "geometry.R1: a number in quotes: write it without them"),
+    ("  1: {length: 76.2}", "  1: {length: '76.2'}", "  1: {length", "tools.1.length: a number in quotes"),
+])
+def test_a_mistake_is_reported_in_the_files_terms_at_its_line(tmp_path: Path, old: str, new: str, line: str,
+                                                              message: str) -> None:
+    text = _shipped_text()
+    assert old in text
+    text = text.replace(old, new, 1)
+    at = next(k for k, written in enumerate(text.splitlines()) if written.startswith(line)) + 1
+    errors = _check(text, tmp_path)
+    assert len(errors) == 1 and errors[0].startswith(f"{at}: {message}"), errors
+
+
+def test_a_quoted_name_is_text_not_a_number(tmp_path: Path) -> None:
+    path = tmp_path / "m.yaml"
+    path.write_text(_shipped_text().replace("name: VERNE", 'name: "1234"'))
+    assert vp.load_machine(path).name == "1234"
+
+
+def test_the_schema_and_the_program_agree_on_a_quoted_number() -> None:
+    import jsonschema
+
+    from verne_post.placement.machine_facts import schema
+
+    document = yaml.safe_load(_shipped_text().replace("  R1: 129.71", '  R1: "129.71"'))
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(document, schema())
+    _, problems = machine_problems(_shipped_text().replace("  R1: 129.71", '  R1: "129.71"'), "m.yaml")
+    assert [p.path for p in problems] == ["geometry.R1"]

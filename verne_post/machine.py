@@ -18,6 +18,7 @@ import yaml
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from .bodies.config import BodiesConfig, CylinderSize, SetupConfig
+from .config_messages import collapse_alternatives, file_path, near_key, quoted_numbers, reason
 from .errors import InputError
 from .kinematics import reference_pose_problem
 from .kinematics.geometry import Geometry
@@ -27,6 +28,8 @@ from .output.controller import (
     PLACEHOLDERS,
     SAMPLES,
     Controller,
+    g_codes,
+    modal_words,
     placeholders,
     template_problem,
 )
@@ -306,6 +309,9 @@ class ControllerConfig(BaseModel):
     """An optional stop (M1) before every tool change but the first."""
     max_line_length: Annotated[int, Field(ge=60, le=100_000)] | None = None
     """Characters per line (default: the dialect's; 252 for LinuxCNC). Comments are shortened to fit."""
+    tool_number: Annotated[int, Field(ge=1, le=10**9)] | None = None
+    """The number of a CL tool without one (NX's TLDATA without LOAD/TOOL): its tool change is written
+    with it (absent: the tool is loaded by hand; the tool_change lines are written without T and M6)."""
     split: Literal["tool"] | None = None
     """tool: one program file per tool, part_1_T2.nc, part_2_T5.nc, ... (each starts where the one before ends)."""
     m_codes: MCodesConfig = MCodesConfig()
@@ -336,19 +342,37 @@ class ControllerConfig(BaseModel):
 
     @model_validator(mode="after")
     def _fits_the_reader(self) -> ControllerConfig:
-        """What verify needs to read the program back, and what is the post's alone to do."""
+        """Every problem of :meth:`problems`, one a line (``machine_problems`` lists each at its key)."""
+        problems = self.problems()
+        if problems:
+            raise ValueError("\n".join(problems))
+        return self
+
+    def problems(self) -> list[str]:
+        """What verify needs to read the program back, and what is the post's alone to do: each
+        problem as ``controller.key: reason``."""
         profile = self.profile()
-        if len(set(profile.axes)) != len(profile.axes):
-            raise ValueError(f"controller.axes: two joints share a letter ({' '.join(profile.axes)})")
+        problems = []
+        for k, (joint, letter) in enumerate(zip(JOINT_ORDER, profile.axes, strict=True)):
+            if letter in profile.axes[:k]:
+                other = JOINT_ORDER[profile.axes.index(letter)]
+                problems.append(f"controller.axes.{joint}: {letter} is the letter of {other} too; two joints "
+                                f"cannot share a letter ({' '.join(profile.axes)})")
+        reader = profile.reader
+        if (profile.comment == "parentheses" and not reader.parenthesis_comments) or (
+                profile.comment == "semicolon" and not reader.semicolon_comments):
+            read = "semicolon" if reader.semicolon_comments else "parentheses"
+            problems.append(f"controller.comment: {profile.dialect} does not read {profile.comment} as a comment "
+                            f"(write comment: {read})")
         numbers, allowed = profile.block_numbers, profile.max_block_number
         if numbers is not None and allowed is not None and not 1 <= numbers[0] <= allowed:
-            raise ValueError(f"controller.block_numbers.start: {profile.dialect} numbers blocks from N1 to "
-                             f"N{allowed}, not N{numbers[0]}")
+            problems.append(f"controller.block_numbers.start: {profile.dialect} numbers blocks from N1 to "
+                            f"N{allowed}, not N{numbers[0]}")
         if profile.program_numbers is not None and profile.program_number is not None:
             low, high = profile.program_numbers
             if not low <= profile.program_number <= high:
-                raise ValueError(f"controller.program_number: {profile.dialect} takes O{low} to O{high}, not "
-                                 f"{profile.program_number}")
+                problems.append(f"controller.program_number: {profile.dialect} takes O{low} to O{high}, not "
+                                f"{profile.program_number}")
         m = profile.m_codes
         lists = {"program_start": profile.program_start, "program_end": profile.end_lines,
                  "tool_change": profile.tool_change_lines}
@@ -357,20 +381,41 @@ class ControllerConfig(BaseModel):
             for k, line in enumerate(lines):
                 where = f"controller.{kind}.{k}" if given else f"controller.{kind} (the dialect's)"
                 if "program" in placeholders(line) and profile.program_number is None:
-                    raise ValueError(f"{where}: {{program}} needs controller.program_number")
+                    problems.append(f"{where}: {{program}} needs controller.program_number")
+                    continue
+                inch = [g for g in g_codes(line) if g in profile.reader.inch]
+                if inch:
+                    metric = " or ".join(f"G{g / 10:g}" for g in sorted(profile.reader.metric))
+                    problems.append(f"{where}: G{inch[0] / 10:g} selects inch input, and the program's words are mm "
+                                    f"({metric} on {profile.dialect})")
+                    continue
                 numbered = f"N{profile.block_numbers[0]} " if profile.block_numbers else ""
                 problem = _read_back(line, numbered + line.format(**SAMPLES), profile)
                 if problem is not None:
-                    raise ValueError(f"{where}: {problem}")
+                    problems.append(f"{where}: {problem}")
         words = " ".join(line.upper() for line in profile.tool_change_lines)
         if not re.search(rf"\bM0*{m.tool_change}\b", words) or not any(
                 "tool" in placeholders(line) for line in profile.tool_change_lines):
-            raise ValueError(f"controller.tool_change: the lines must hold {{tool}} and M{m.tool_change} "
-                             f"(m_codes.tool_change), where the reader changes the tool")
+            problems.append(f"controller.tool_change: the lines must hold {{tool}} and M{m.tool_change} "
+                            f"(m_codes.tool_change), where the reader changes the tool")
         ends = " ".join(line.upper() for line in profile.end_lines)
         if not re.search(rf"\bM0*{m.end}\b", ends):
-            raise ValueError(f"controller.program_end: no line ends the program with M{m.end} (m_codes.end)")
-        return self
+            problems.append(f"controller.program_end: no line ends the program with M{m.end} (m_codes.end)")
+        return problems
+
+    def start_warning(self) -> str | None:
+        """What the dialect's start lines set that a ``program_start`` of the file leaves out
+        (None if nothing): the controller keeps whatever mode it was left in."""
+        if self.program_start is None:
+            return None
+        profile = self.profile()
+        given = modal_words(self.program_start, profile.reader)
+        missing = [word for key, word in modal_words(DIALECTS[self.dialect].program_start, profile.reader).items()
+                   if key not in given]
+        if not missing:
+            return None
+        return (f"leaves out {' '.join(missing)} of the {self.dialect} start lines: the controller keeps the "
+                f"mode it was left in (add them, unless the machine always starts so)")
 
 
 def _read_back(line: str, written: str, profile: Controller) -> str | None:
@@ -484,6 +529,7 @@ class Machine(BaseModel):
     calibration: CalibrationRecord | None = None
     """Provenance of a calibrated file (written by verne-post calibrate)."""
     _source: str = PrivateAttr(default="verne.yaml")
+    _warnings: tuple[str, ...] = PrivateAttr(default=())
 
     @model_validator(mode="after")
     def _positions_within_travel(self) -> Machine:
@@ -497,6 +543,11 @@ class Machine(BaseModel):
                     raise ValueError(f"positions.{which}.{name} = {value:g} is outside the travel of {name} "
                                      f"({limits.min:g} to {limits.max:g})")
         return self
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What in the file is allowed but likely a mistake, each ``FILE:LINE: key: reason``."""
+        return self._warnings
 
     @property
     def source(self) -> str:
@@ -541,30 +592,76 @@ _MOVED = {("gcode", "block_numbers"): "controller.block_numbers (false, true or 
 _PATH_IN_MESSAGE = re.compile(r"^([A-Za-z_][\w]*(?:\.[\w]+)+)\b")
 
 
-def _problems(error: ValidationError, lines: dict[tuple[str, ...], int]) -> list[MachineProblem]:
-    """Every error of a validation, each at the line of the deepest key of its path in the file."""
-    problems = []
+def _problems(error: ValidationError, lines: dict[tuple[str, ...], int], data: object,
+              within: tuple[str, ...] = (), model: type[BaseModel] | None = None) -> list[MachineProblem]:
+    """Every error of a validation of ``data`` (of its section at key path ``within``), each at the
+    line of the deepest key of its path in the file, in the file's terms (:mod:`config_messages`);
+    a check's message of several lines is a problem a line."""
+    found = []
     for item in error.errors():
-        loc = tuple(str(p) for p in item["loc"])
-        reason = item["msg"].removeprefix("Value error, ")
+        loc = within + tuple(str(p) for p in item["loc"])
+        path, alternative = file_path(data, loc, item["type"] == "missing")
         if item["type"] == "extra_forbidden":
-            reason = f"moved to {_MOVED[loc]}" if loc in _MOVED else "unknown key"
+            near = near_key(model or Machine, path)
+            reasons = [f"moved to {_MOVED[path]}" if path in _MOVED else
+                       "unknown key" + (f" (did you mean {near}?)" if near else "")]
         elif item["type"] == "missing":
-            reason = "missing (required)"
-        named = _PATH_IN_MESSAGE.match(reason)
-        if named and tuple(named.group(1).split("."))[:len(loc)] == loc:  # a deeper key than the check's own
-            loc = tuple(named.group(1).split("."))
-            reason = reason.removeprefix(f"{named.group(1)}: ")
+            reasons = ["missing (required)"]
+        else:
+            reasons = reason(item).split("\n")
+        found += [(path, alternative, text) for text in reasons]
+    return [_problem(path, text, lines) for path, text in collapse_alternatives(found)]
+
+
+def _problem(loc: tuple[str, ...], reason: str, lines: dict[tuple[str, ...], int]) -> MachineProblem:
+    named = _PATH_IN_MESSAGE.match(reason)
+    if named and tuple(named.group(1).split("."))[:len(loc)] == loc:  # a deeper key than the check's own
+        loc = tuple(named.group(1).split("."))
+        reason = reason.removeprefix(f"{named.group(1)}: ")
+    if reason == "missing (required)" and len(loc) > 1:  # a missing key: the line of the mapping that lacks it
+        line = next((lines[loc[:k]] for k in range(len(loc) - 1, 0, -1) if loc[:k] in lines), None)
+    else:
         line = next((lines[loc[:k]] for k in range(len(loc), 0, -1) if loc[:k] in lines), None)
-        if item["type"] == "missing" and len(loc) > 1:  # a missing key: the line of the mapping that lacks it
-            line = next((lines[loc[:k]] for k in range(len(loc) - 1, 0, -1) if loc[:k] in lines), None)
-        problems.append(MachineProblem(line, ".".join(loc) or "(top level)", reason))
-    return problems
+    return MachineProblem(line, ".".join(loc) or "(top level)", reason)
 
 
-def _key_lines(root: yaml.Node) -> dict[tuple[str, ...], int]:
-    """The 1-based line of every key (and sequence item) of a YAML document, by its key path."""
+def _quoted(model: BaseModel, document: _Document) -> list[MachineProblem]:
+    """A number written in quotes, which pydantic reads as the number and the schema refuses
+    (an editor would flag it): refused, so that the two agree."""
+    at = dict(document.quoted)
+    return [MachineProblem(at[path], ".".join(path), "a number in quotes: write it without them")
+            for path in quoted_numbers(model, document.quoted)]
+
+
+def _controller_checks(data: dict, error: ValidationError, lines: dict[tuple[str, ...], int]) -> list[MachineProblem]:
+    """The controller section's own checks (axis letters, lines read back), which pydantic does
+    not run on a section with a wrong key: run on the section without its wrong keys."""
+    section = data.get("controller")
+    locs = [tuple(map(str, item["loc"])) for item in error.errors()]
+    wrong = {loc[1] for loc in locs if len(loc) > 1 and loc[0] == "controller"}
+    if not isinstance(section, dict) or not wrong or ("controller",) in locs:
+        return []
+    try:
+        ControllerConfig.model_validate({k: v for k, v in section.items() if str(k) not in wrong})
+    except ValidationError as exc:
+        return [p for p in _problems(exc, lines, data, ("controller",), Machine) if p.path.split(".")[1] not in wrong]
+    return []
+
+
+@dataclass(frozen=True)
+class _Document:
+    """A YAML document as read: its data, the 1-based line of every key (and sequence item) by
+    its key path, and the values written in quotes that read as numbers."""
+
+    data: object
+    lines: dict[tuple[str, ...], int]
+    quoted: tuple[tuple[tuple[str, ...], int], ...] = ()
+
+
+def _document(root: yaml.Node, data: object) -> _Document:
+    """The :class:`_Document` of the node tree ``root`` and the ``data`` constructed from it."""
     lines: dict[tuple[str, ...], int] = {}
+    quoted = []
     stack: list[tuple[tuple[str, ...], yaml.Node]] = [((), root)]
     while stack:
         path, node = stack.pop()
@@ -579,7 +676,12 @@ def _key_lines(root: yaml.Node) -> dict[tuple[str, ...], int]:
                 child = (*path, str(k))
                 lines.setdefault(child, value.start_mark.line + 1)
                 stack.append((child, value))
-    return lines
+        elif node.style in ("'", '"') and _NUMBER_TEXT.fullmatch(node.value.strip()):
+            quoted.append((path, node.start_mark.line + 1))
+    return _Document(data, lines, tuple(sorted(quoted, key=lambda q: q[1])))
+
+
+_NUMBER_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
 #: Bounds on a machine file: bytes, nesting depth, and values (aliases expanded).
@@ -611,9 +713,8 @@ class _MachineLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep)
 
 
-def _parse_yaml(text: str, source: str) -> tuple[object, dict[tuple[str, ...], int]]:
-    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`, and the line of
-    each of its keys (:func:`_key_lines`)."""
+def _parse_yaml(text: str, source: str) -> _Document:
+    """The document of ``text``, within :data:`MAX_DEPTH` and :data:`MAX_VALUES`."""
     try:
         depth = 0
         for event in yaml.parse(text, Loader=_MachineLoader):  # the event stream: no recursion yet
@@ -627,15 +728,33 @@ def _parse_yaml(text: str, source: str) -> tuple[object, dict[tuple[str, ...], i
         try:
             node = loader.get_single_node()
             if node is None:
-                return None, {}
+                return _Document(None, {})
             _count_values(node, source)
-            return loader.construct_document(node), _key_lines(node)
+            return _document(node, loader.construct_document(node))
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(f"invalid YAML: {getattr(exc, 'problem', None) or exc}", source,
-                         None if mark is None else mark.line + 1) from None
+        line, reason = _yaml_problem(exc)
+        raise InputError(f"invalid YAML: {reason}", source, line) from None
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> tuple[int | None, str]:
+    """The line (1-based) and reason of a YAML error, in the user's terms: a key without a
+    space after its colon and an unclosed ``{`` or ``[`` at the line where they are written
+    (YAML notices them a line later), a tab named as such."""
+    mark, context = getattr(exc, "problem_mark", None), getattr(exc, "context_mark", None)
+    problem, while_ = str(getattr(exc, "problem", None) or exc), str(getattr(exc, "context", None) or "")
+    line = None if mark is None else mark.line + 1
+    if "'\\t'" in problem:
+        return line, "a tab character: indent with spaces"
+    if context is None or mark is None or context.line >= mark.line:
+        return line, problem
+    if while_ == "while scanning a simple key":
+        return context.line + 1, f"{problem}: write a key as 'key: value', with a space after the colon"
+    if while_ in ("while parsing a flow mapping", "while parsing a flow sequence"):
+        bracket = "{}" if "mapping" in while_ else "[]"
+        return context.line + 1, f"the '{bracket[0]}' of this line is not closed by a '{bracket[1]}' ({problem})"
+    return line, problem
 
 
 def _count_values(root: yaml.Node, source: str) -> None:
@@ -696,13 +815,17 @@ def load_setup(path: str | Path) -> SetupConfig:
     fixtures) at its top level, read and validated as a machine file is (the first problem at its line)."""
     source = str(path)
     text = _bounded_text(path, "setup file", "the setup file")
-    data, lines = _parse_yaml(text, source)
-    if not isinstance(data, dict):
+    document = _parse_yaml(text, source)
+    if not isinstance(document.data, dict):
         raise InputError("a setup file must be a YAML mapping of units, stock and fixtures", source)
     try:
-        return SetupConfig.model_validate(data)
+        setup = SetupConfig.model_validate(document.data)
     except ValidationError as exc:
-        raise _problems(exc, lines)[0].error(source) from None
+        raise _problems(exc, document.lines, document.data, model=SetupConfig)[0].error(source) from None
+    quoted = _quoted(setup, document)
+    if quoted:
+        raise quoted[0].error(source)
+    return setup
 
 
 def machine_from_text(text: str, source: str) -> Machine:
@@ -719,13 +842,21 @@ def machine_problems(text: str, source: str) -> tuple[Machine | None, list[Machi
     """The machine of a machine file's text and, if it has any, every problem in it in the order
     of the file (then None): YAML errors end the reading at the first; the model's checks are
     all reported, each at the line of its key. ``source`` names the file."""
-    data, lines = _parse_yaml(text, source)
+    document = _parse_yaml(text, source)
+    data, lines = document.data, document.lines
     if not isinstance(data, dict):
         raise InputError("machine file must be a YAML mapping", source)
     try:
         machine = Machine.model_validate(data)
     except ValidationError as exc:
-        problems = _problems(exc, lines)
+        problems = _problems(exc, lines, data) + _controller_checks(data, exc, lines)
         return None, sorted(problems, key=lambda p: (p.line is None, p.line or 0))
+    quoted = _quoted(machine, document)
+    if quoted:
+        return None, quoted
     machine._source = Path(source).name
+    start = machine.controller.start_warning()
+    if start is not None:
+        where = ("controller", "program_start")
+        machine._warnings = (str(MachineProblem(lines.get(where), ".".join(where), start).error(source)),)
     return machine, []

@@ -377,7 +377,7 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     part = next(_parts(machine, poses, options, len(poses), clock.lap, plan=options.plan and feasible))
     part, timing = part.guarded(machine, poses, options, part.timed())
     violations = _violations(part.checks, part.others, list(timing.violations), placement)
-    warnings = list(poses.warnings) + part.warnings
+    warnings = [*machine.warnings, *poses.warnings, *part.warnings]
     if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
         warnings.append(_cone_warning(machine, options, poses.source))
     program = None
@@ -493,7 +493,7 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     checks: list[Violation] = []
     others: list[Violation] = []
     timing: list[Violation] = []
-    warnings = list(poses.warnings)
+    warnings = [*machine.warnings, *poses.warnings]
     in_cone = False
     failed = placement is not None and not placement.feasible
     helped = planner is not plan_timing

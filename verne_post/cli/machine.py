@@ -11,9 +11,12 @@ import click
 from ..errors import InputError
 from ..machine import load_machine
 from ..output.atomic import atomic_write
-from ..output.controller import DIALECTS
+from ..output.controller import DIALECTS, JOINT_ORDER
 from .common import tool_length_option, user_errors
 from .main import main
+
+#: The schema's file, as the first line of a machine file names it (beside the file).
+SCHEMA_FILE = "verne.schema.json"
 
 
 @main.group("machine")
@@ -35,6 +38,8 @@ def machine_check_command(machine_file: str) -> None:
             click.echo(f"verne-post: error: {problem.error(machine_file)}", err=True)
         sys.exit(2)
     assert machine is not None
+    for warning in machine.warnings:
+        click.echo(f"verne-post: warning: {warning}", err=True)
     click.echo(f"{machine_file}: valid machine file")
     for line in summary(machine):
         click.echo(f"  {line}")
@@ -63,16 +68,56 @@ def machine_schema_command(output: str | None) -> None:
 @user_errors
 def machine_init_command(output: str, dialect: str) -> None:
     """Write a fully commented machine file to start from: the VERNE as shipped (edit its geometry,
-    limits, tools, positions, controller, then 'verne-post machine check' it)."""
+    limits, tools, positions, controller, then 'verne-post machine check' it), and beside it the
+    schema its first line names, for an editor's checks (unless one is there)."""
     from ..machine import machine_text
+    from ..placement.machine_facts import schema
 
     if Path(output).exists():
         raise InputError("exists already: give a new file (nothing is overwritten)", output)
     text = machine_text(None)
-    shipped = "\n  dialect: linuxcnc\n"
-    assert shipped in text, "the shipped machine file sets controller.dialect"
+    start, end = text.index("\n  dialect: linuxcnc\n") + 1, text.index("\n\nsafe:")
     with atomic_write(output) as handle:
-        handle.write(text.replace(shipped, f"\n  dialect: {dialect}\n"))
+        handle.write(text[:start] + controller_keys(dialect) + text[end:])
+    beside = Path(output).with_name(SCHEMA_FILE)
+    if not beside.exists():
+        with atomic_write(beside) as handle:
+            handle.write(json.dumps(schema(), indent=2) + "\n")
+        click.echo(f"{output}: written, and {beside} for an editor's checks")
+    else:
+        click.echo(f"{output}: written ({beside} is there already: kept)")
+
+
+def controller_keys(dialect: str) -> str:
+    """The ``controller:`` keys of a machine file: ``dialect``, then every other key commented out
+    with the dialect's value (uncommented, each gives what the dialect gives)."""
+    preset = DIALECTS[dialect]
+    m = preset.m_codes
+
+    def flow(lines: tuple[str, ...]) -> str:
+        return json.dumps(list(lines))
+
+    axes = ", ".join(f"{joint}: {letter}" for joint, letter in zip(JOINT_ORDER, preset.axes, strict=True))
+    other = "parentheses" if preset.comment == "semicolon" else "semicolon"
+    return "\n".join([
+        f"  dialect: {dialect}",
+        f"  # axes: {{{axes}}}   # the address of each joint",
+        f"  # comment: {preset.comment:<23}# or {other}",
+        "  # program_number: 1234            # " + ("its O line; " if preset.program_number_line else "")
+        + "{program} in the lines below",
+        f"  # program_start: {flow(preset.program_start)}",
+        f"  # tool_change: {flow(preset.tool_change_lines)}   # {{tool}} {{length}} {{delta}} (mm) {{spindle}} (rpm) "
+        "{name} {program}",
+        f"  # program_end: {flow(preset.end_lines)}",
+        "  # tool_number: 1                  # a CL tool without a number (NX TLDATA alone); absent: by hand",
+        "  # block_numbers: {start: 10, step: 10}",
+        "  # optional_stop: true             # M1 before every tool change but the first",
+        f"  # max_line_length: {preset.max_line_length}",
+        f"  # m_codes: {{spindle_cw: {m.spindle_cw}, spindle_ccw: {m.spindle_ccw}, spindle_off: {m.spindle_off}, "
+        f"coolant_flood: {m.coolant_flood}, coolant_mist: {m.coolant_mist},",
+        f"  #           coolant_through: {m.coolant_through}, coolant_off: {m.coolant_off}, stop: {m.stop}, "
+        f"optional_stop: {m.optional_stop}, tool_change: {m.tool_change}, end: {m.end}}}",
+    ])
 
 
 @machine_group.command("show")
@@ -82,8 +127,8 @@ def machine_init_command(output: str, dialect: str) -> None:
               help="Also draw the workspace sections: PNG, or SVG when it ends in .svg (needs matplotlib).")
 @user_errors
 def machine_show_command(machine_file: str, tool_length: float, output: str | None) -> None:
-    """What to know before the first run: joint ranges, the reference pose, the workspace for a tool
-    (axis along the table normal) and the tightest singularity margins in it."""
+    """What to know before the first run: joint ranges (with their letters), the reference pose, the
+    workspace for a tool above the table (axis along the table normal) and the limits at its edges."""
     from ..placement.machine_facts import facts, facts_table
 
     machine = load_machine(machine_file)

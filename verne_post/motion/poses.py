@@ -85,6 +85,19 @@ def _tool_length(machine: Machine, change: ToolChange, fallback: float | None, s
 
 
 
+def _numbered(toolpath: Toolpath, number: int | None) -> Toolpath:
+    """``toolpath`` with its tool changes without a number (tool 0: tool data alone) given ``number``
+    (the machine file's controller.tool_number; None leaves them)."""
+    unnumbered = [e.index for e in toolpath.events if isinstance(e, ToolChange) and e.tool == 0]
+    if number is None or not unnumbered:
+        return toolpath
+    tool = toolpath.tool.copy()
+    tool[min(unnumbered):][tool[min(unnumbered):] == 0] = number
+    events = tuple(replace(e, tool=number) if isinstance(e, ToolChange) and e.tool == 0 else e
+                   for e in toolpath.events)
+    return replace(toolpath, tool=tool, events=events)
+
+
 def _tool_use(machine: Machine, number: int, length: float, line: int, source: str,
               diameter: float | None = None) -> ToolUse:
     entry = machine.tools.get(number)
@@ -98,6 +111,7 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
                   tool_length: float | None = None, setup: Setup = NO_SETUP) -> MachinePoses:
     """Table-frame poses with tool lengths and continuity sequences (see module docstring);
     ``setup`` in the part frame (mm), placed at the work offset with the tips."""
+    toolpath = _numbered(toolpath, machine.controller.tool_number)
     n = len(toolpath)
     offset = np.asarray(machine.work_offset if work_offset is None else work_offset, dtype=float)
     changes = [e for e in toolpath.events if isinstance(e, ToolChange)]

@@ -43,8 +43,9 @@ RS-274 default):
 
 from __future__ import annotations
 
+import re
 import string
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -57,6 +58,8 @@ __all__ = [
     "Controller",
     "MCodes",
     "ReaderFacts",
+    "g_codes",
+    "modal_words",
     "placeholders",
     "render",
     "template_problem",
@@ -99,8 +102,11 @@ class ReaderFacts:
     metric: frozenset[int] = frozenset({210})  # G21
     inch: frozenset[int] = frozenset({200})  # G20
     # Codes that change nothing a joint-space program needs: plane, cutter compensation off, tool
-    # length offset off, canned cycle off, the first work offset, path control, absolute distance.
-    harmless: frozenset[int] = frozenset({170, 180, 190, 400, 490, 540, 610, 611, 640, 800, 900})
+    # length offset off, canned cycle off, path control, absolute distance.
+    harmless: frozenset[int] = frozenset({170, 180, 190, 400, 490, 610, 611, 640, 800, 900})
+    # Codes that select a work offset (G54 to G59, G59.1 to G59.3, FANUC's G54.1): the axis words
+    # would be shifted by it, and a joint-space program's words are the joints' own positions.
+    work_offsets: frozenset[int] = frozenset({540, 541, 550, 560, 570, 580, 590, 591, 592, 593})
     parenthesis_comments: bool = True
     semicolon_comments: bool = True
     program_number: bool = False  # an O word names the program (before its first block)
@@ -159,6 +165,30 @@ class Controller:
     def tool_change_lines(self) -> tuple[str, ...]:
         return self.tool_change if self.tool_change is not None else (f"T{{tool}} M{self.m_codes.tool_change}",)
 
+    @property
+    def hand_loaded_lines(self) -> tuple[str, ...]:
+        """The tool-change lines for a tool without a number, loaded by hand: without the words
+        that hold ``{tool}`` or the tool-change M code, and without comments but whole comment
+        lines free of ``{tool}`` (what is left, SINUMERIK's ``D0``, still puts the controller in
+        the state the program needs)."""
+        change = re.compile(rf"M0*{self.m_codes.tool_change}", re.IGNORECASE)
+        lines = []
+        for line in self.tool_change_lines:
+            if self.is_comment(line):
+                kept = "" if "tool" in placeholders(line) else line
+            else:
+                code = re.sub(r"\([^()]*\)|;.*", " ", line)  # a comment of the line, perhaps of {tool}
+                kept = " ".join(word for word in code.split() if "{tool" not in word and not change.fullmatch(word))
+            if kept:
+                lines.append(kept)
+        return tuple(lines)
+
+    def is_comment(self, line: str) -> bool:
+        """Whether ``line`` is a comment and nothing else, as this controller reads it (no block number)."""
+        text = line.strip()
+        return bool((self.reader.semicolon_comments and text.startswith(";")) or (
+            self.reader.parenthesis_comments and re.fullmatch(r"(\([^()]*\)\s*)+", text)))
+
     def comment_line(self, text: str) -> str:
         """``text`` (already made safe: ``output.gcode.comment_text``) as a comment in this style."""
         return f"({text})" if self.comment == "parentheses" else f"; {text}"
@@ -191,7 +221,10 @@ DIALECTS: Mapping[str, Controller] = {
         tool_change=("T{tool}", "M6", "D0"),
         max_line_length=512,
         reader=ReaderFacts(metric=frozenset({710, 7100}), inch=frozenset({700, 7000}),
-                           harmless=frozenset({170, 180, 190, 400, 540, 600, 640, 900, 5000}),
+                           harmless=frozenset({170, 180, 190, 400, 600, 640, 900}),
+                           # G54 to G57, G500 and G505 to G599: settable frames ("NC programming" 12/2019,
+                           # "Settable zero offset"); the frame of G500 need not be zero
+                           work_offsets=frozenset({540, 550, 560, 570, 5000, *range(5050, 6000, 10)}),
                            parenthesis_comments=False, cutting_edge_off=True, keywords=frozenset({"TRAFOOF"})),
     ),
 }
@@ -212,6 +245,25 @@ PLACEHOLDERS: Mapping[str, frozenset[str]] = {
 #: them (``{name:d}``) fails on every program.
 SAMPLES = {"tool": 1, "length": 100.0, "delta": 100.0, "spindle": 10000.0, "name": "PART", "program": 1,
            "tolerance": 0.005}
+
+
+def g_codes(line: str) -> list[int]:
+    """The G codes of a profile line in tenths (G61.1 is 611), as the reader counts them; comments
+    (either style) and placeholders left out."""
+    code = re.sub(r"\([^()]*\)|;.*|\{[^{}]*\}", " ", line).upper()
+    return [round(float(value) * 10) for value in re.findall(r"(?<![A-Z_])G\s*(\d+(?:\.\d*)?)", code)]
+
+
+def modal_words(lines: Iterable[str], reader: ReaderFacts) -> dict[str, str]:
+    """The modes a profile's lines set: each G code, and the keywords (TRAFOOF), by a key that
+    any metric code shares (``"metric"``), to how the line writes it."""
+    words: dict[str, str] = {}
+    for line in lines:
+        if line.strip().upper() in reader.keywords:
+            words.setdefault(line.strip().upper(), line.strip().upper())
+        for g in g_codes(line):
+            words.setdefault("metric" if g in reader.metric else str(g), f"G{g / 10:g}")
+    return words
 
 
 def placeholders(template: str) -> set[str]:

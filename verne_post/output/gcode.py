@@ -260,14 +260,15 @@ def _event_lines(event: Event, program: Program, fmt: GcodeFormat, values: dict[
             raise ValueError(f"{where}: tool {tool} length {length} / Delta {delta} is not finite")
         dec = fmt.linear_decimals
         note = (_comment(f"TOOL {tool} LENGTH {_fixed(length, dec)} DELTA {_fixed(delta, dec)}", controller), False)
-        # Tool 0: the CL file gave tool data but no tool number; T0 M6 would unload the spindle.
-        if tool == 0:
-            return [note]
-        stop = [] if first_tool or not controller.optional_stop else [(f"M{m.optional_stop}", True)]
         spindle = (program.tool_spindle or {}).get(event.line, 0.0)
         here = {**values, "tool": tool, "length": Number(length, dec), "delta": Number(delta, dec),
                 "spindle": Number(spindle, None)}
-        return [*stop, note, *((_line(t, here, controller, where), True) for t in controller.tool_change_lines)]
+        # Tool 0: the CL file gave tool data but no tool number (and the machine file none:
+        # controller.tool_number); T0 M6 would unload the spindle, so it is loaded by hand.
+        if tool == 0:
+            return [note, *_lines(controller.hand_loaded_lines, here, controller, where)]
+        stop = [] if first_tool or not controller.optional_stop else [(f"M{m.optional_stop}", True)]
+        return [*stop, note, *_lines(controller.tool_change_lines, here, controller, where)]
     if isinstance(event, Spindle):
         if event.direction == "OFF":
             return [(f"M{m.spindle_off}", True)]
@@ -302,6 +303,13 @@ def _comment(text: str, controller: Controller) -> str:
     nothing of ``text`` is left."""
     safe = comment_text(text, min(MAX_COMMENT_CHARS, controller.max_line_length - 2))
     return controller.comment_line(safe) if safe else ""
+
+
+def _lines(templates: Iterable[str], values: dict[str, object], controller: Controller,
+           where: str) -> list[tuple[str, bool]]:
+    """Lines of the profile as ``(text, is_block)``: a comment line is no block (no block number)."""
+    texts = [_line(t, values, controller, where) for t in templates]
+    return [(text, not controller.is_comment(text)) for text in texts]
 
 
 def _line(template: str, values: dict[str, object], controller: Controller, where: str) -> str:
@@ -493,14 +501,14 @@ class GcodeWriter:
         if program.part_name is not None:
             head.append((_comment(f"PART {program.part_name}", controller), False))
         head.extend((comment, False) for comment in (_comment(h, controller) for h in program.header) if comment)
-        head.extend((_line(t, self.values, controller, "program start"), True) for t in controller.program_start)
+        head.extend(_lines(controller.program_start, self.values, controller, "program start"))
         return self._render(head)
 
     def tail(self) -> str:
         """The end of the program (the same text however often asked for)."""
         controller = self.fmt.controller
         numbered = self.numbered
-        end = [(_line(t, self.values, controller, "program end"), True) for t in controller.end_lines]
+        end = _lines(controller.end_lines, self.values, controller, "program end")
         text = self._render(end) + ("%\n" if controller.percent else "")
         self.numbered = numbered
         return text

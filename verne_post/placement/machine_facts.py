@@ -2,8 +2,8 @@
 
 ``verne-post machine check`` prints :func:`summary`; ``verne-post machine show`` prints
 :func:`facts` as a table: the joint ranges, the reference pose's joints, the tool-tip workspace
-for one tool length with the axis along the table normal, and the tightest singularity margins
-inside it. ``machine schema`` writes :func:`schema`. Units: mm and degrees, table frame.
+for one tool length with the axis along the table normal above the table, and the limits that
+set its edges. ``machine schema`` writes :func:`schema`. Units: mm and degrees, table frame.
 """
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ..api import JOINT_NAMES, forward_kinematics, inverse_kinematics, inverse_kinematics_pair
+from ..api import JOINT_NAMES, forward_kinematics, inverse_kinematics
 from ..machine import Machine
 from ..output.controller import Controller
-from .workspace import Workspace, workspace
+from .workspace import Workspace, boundary_labels, workspace
 
 _UNITS = ("mm", "mm", "mm", "deg", "deg")
 
@@ -86,55 +86,59 @@ def _controller_lines(profile: Controller) -> list[str]:
 
 @dataclass(frozen=True)
 class Facts:
-    """The workspace for one tool length (mm) with the axis along the table normal: the extents
-    of the usable tool tips (every limit and margin held; mm, table frame, None if there are
-    none) and the smallest margins among them (serial, parallel, machine; rod clearance mm)."""
+    """The workspace for one tool length (mm) with the axis along the table normal, above the
+    table (tool tip z >= 0, table frame): the extents of the usable tool tips (every limit and
+    margin held; mm, table frame, None if there are none) and the limits that set its edges, each
+    with a tool tip (mm, table frame) on the edge it sets."""
 
     tool_length: float
     extents: dict[str, tuple[float, float] | None]
-    margins: dict[str, float | None]
+    edges: tuple[tuple[str, tuple[float, float, float]], ...]
     workspace: Workspace
 
 
 def facts(machine: Machine, tool_length: float, step: float = 10.0) -> Facts:
     """:class:`Facts` from the workspace sections (grid ``step`` mm) through the table centre."""
     ws = workspace(machine, tool_length=tool_length, step=step)
-    tips = []
+    tips, edges = [], {}
     for section in ws.sections:
         v, u = np.nonzero(section.headroom >= 0)
-        a, b = section.u[u], section.v[v]
-        level = np.full(len(a), section.level)
-        tips.append({"xz": (a, level, b), "yz": (level, a, b), "xy": (a, b, level)}[section.plane])
-    points = np.column_stack([np.concatenate([t[k] for t in tips]) for k in range(3)]) if tips else np.zeros((0, 3))
+        tips.append(_in_table_frame(section.plane, section.u[u], section.v[v], section.level))
+        for label, a, b in boundary_labels(section):
+            tip = _in_table_frame(section.plane, np.array([a]), np.array([b]), section.level)[0]
+            if tip[2] >= 0 and label not in edges:
+                edges[label] = (float(tip[0]), float(tip[1]), float(tip[2]))
+    points = np.concatenate(tips) if tips else np.zeros((0, 3))
+    points = points[points[:, 2] >= 0]  # the tool tip above the table
     extents: dict[str, tuple[float, float] | None] = {
         axis: (float(points[:, k].min()), float(points[:, k].max())) if len(points) else None
         for k, axis in enumerate("xyz")}
-    margins: dict[str, float | None] = dict.fromkeys(("serial", "parallel", "machine", "rod_clearance"))
-    if len(points):
-        ik = inverse_kinematics_pair(machine, points, np.tile([0.0, 0.0, 1.0], (len(points), 1)), 1,
-                                     tool_length=tool_length)
-        margins = {name: float(np.nanmin(getattr(ik.margins, name))) for name in margins}
-    return Facts(tool_length, extents, margins, ws)
+    return Facts(tool_length, extents, tuple(edges.items()), ws)
+
+
+def _in_table_frame(plane: str, u: np.ndarray, v: np.ndarray, level: float) -> np.ndarray:
+    """(N, 3) tool tips (mm, table frame) of points ``u``, ``v`` (mm) of a section of ``plane``."""
+    fixed = np.full(len(u), level)
+    return np.column_stack({"xz": (u, fixed, v), "yz": (fixed, u, v), "xy": (u, v, fixed)}[plane])
 
 
 def facts_table(machine: Machine, found: Facts) -> list[str]:
-    """:func:`facts` as lines of text (mm, degrees)."""
+    """:func:`facts` as lines of text (mm, degrees); each joint with its letter in the programs."""
     ref = reference_joints(machine)
-    rows = [f"{'joint':8} {'min':>10} {'max':>10} {'velocity':>10} {'accel.':>10} {'jerk':>10} {'reference':>10}"]
+    letters = machine.controller.profile().axes
+    rows = [f"{'joint':14} {'min':>10} {'max':>10} {'velocity':>10} {'accel.':>10} {'jerk':>10} {'reference':>10}"]
     for k, (name, unit) in enumerate(zip(JOINT_NAMES, _UNITS, strict=True)):
         j = getattr(machine.joints, name)
         low, high = ("-", "-") if j.continuous else (f"{j.min:g}", f"{j.max:g}")
-        rows.append(f"{name + ' ' + unit:8} {low:>10} {high:>10} {j.velocity:>10g} {j.acceleration:>10g} "
-                    f"{j.jerk:>10g} {ref[k]:>10.3f}")
-    rows.append(f"workspace with a {found.tool_length:g} mm tool, axis along the table normal, every limit and "
-                f"margin held (sections through the table centre):")
+        rows.append(f"{f'{name} ({letters[k]}) {unit}':14} {low:>10} {high:>10} {j.velocity:>10g} "
+                    f"{j.acceleration:>10g} {j.jerk:>10g} {ref[k]:>10.3f}")
+    rows.append(f"workspace with a {found.tool_length:g} mm tool, axis along the table normal, above the table, "
+                f"every limit and margin held (sections through the table centre):")
     for axis, span in found.extents.items():
         rows.append(f"  {axis}: " + ("none" if span is None else f"{span[0]:.0f} to {span[1]:.0f} mm"))
-    m = found.margins
-    rows.append("tightest margins there: " + ", ".join(
-        f"{name.replace('_', ' ')} {'-' if value is None else f'{value:.3g}'}" + (" mm" if name == "rod_clearance"
-                                                                               else "")
-        for name, value in m.items()))
+    if found.edges:
+        rows.append("its edges are set by:")
+        rows += [f"  {label}: at {x:.0f} {y:.0f} {z:.0f} mm" for label, (x, y, z) in found.edges]
     for which in ("home", "tool_change"):
         position = getattr(machine.positions, which)
         if position is not None:

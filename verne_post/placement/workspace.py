@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -124,9 +125,26 @@ def boundary_labels(section: Section) -> list[tuple[str, float, float]]:
 
 
 def plot_workspace(ws: Workspace, path: str | Path, program_tips: np.ndarray | None = None) -> None:
-    """Draw the sections (PNG or SVG by the suffix of ``path``), coloured by the smallest
-    headroom; the constraint bounding the usable region is written along its edge; optional
-    program tool tips (N, 3) mm, table frame, are overlaid (projected onto each section)."""
+    """Draw the sections (PNG or SVG by the suffix of ``path``): :func:`workspace_figure`."""
+    import matplotlib.pyplot as plt
+
+    from ..output.atomic import atomic_write
+
+    figure = workspace_figure(ws, program_tips)
+    suffix = Path(path).suffix.lower().lstrip(".") or "png"
+    with atomic_write(path, binary=True) as handle:
+        figure.savefig(handle, format=suffix, dpi=FIGURE_DPI)
+    plt.close(figure)
+
+
+FIGURE_DPI = 110
+
+
+def workspace_figure(ws: Workspace, program_tips: np.ndarray | None = None) -> Any:
+    """The sections as a matplotlib figure, coloured by the smallest headroom; the constraint
+    bounding the usable region is written along its edge, inside its section and clear of the
+    other labels; optional program tool tips (N, 3) mm, table frame, are overlaid (projected
+    onto each section)."""
     try:
         import matplotlib
 
@@ -137,9 +155,8 @@ def plot_workspace(ws: Workspace, path: str | Path, program_tips: np.ndarray | N
         from ..errors import InputError
 
         raise InputError("drawing workspace maps needs matplotlib: pip install 'verne-post[plot]'") from None
-    from ..output.atomic import atomic_write
 
-    figure, axes = plt.subplots(1, 3, figsize=(16, 5.8), constrained_layout=True)
+    figure, axes = plt.subplots(1, 3, figsize=(16, 5.8), constrained_layout=True, dpi=FIGURE_DPI)
     colours = plt.get_cmap("viridis")
     image = None
     for ax, section in zip(axes, ws.sections, strict=True):
@@ -150,8 +167,8 @@ def plot_workspace(ws: Workspace, path: str | Path, program_tips: np.ndarray | N
         image = ax.imshow(np.ma.masked_less(value, 0), origin="lower", extent=extent, cmap=colours, vmin=0, vmax=1,
                           aspect="equal")
         for label, u, v in boundary_labels(section):
-            ax.annotate(label, (u, v), fontsize=7, ha="center", color="black",
-                        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "alpha": 0.7, "lw": 0})
+            ax.annotate(label, (u, v), xytext=(0, 0), textcoords="offset pixels", fontsize=7, ha="center",
+                        color="black", bbox={"boxstyle": "round,pad=0.2", "fc": "white", "alpha": 0.7, "lw": 0})
         if program_tips is not None and len(program_tips):
             index = {"x": 0, "y": 1, "z": 2}
             ax.plot(program_tips[:, index[section.plane[0]]], program_tips[:, index[section.plane[1]]], ",",
@@ -169,10 +186,32 @@ def plot_workspace(ws: Workspace, path: str | Path, program_tips: np.ndarray | N
     figure.suptitle(f"VERNE tool-tip workspace, table frame: tool {ws.tool_length:g} mm, tilt {ws.tilt:g} deg, "
                     f"rotary theta2 {ws.rotary:g} deg. Pink: reachable but past a limit"
                     + ("; red dots: the program's tool tips" if program_tips is not None else ""))
-    suffix = Path(path).suffix.lower().lstrip(".") or "png"
-    with atomic_write(path, binary=True) as handle:
-        figure.savefig(handle, format=suffix, dpi=110)
-    plt.close(figure)
+    figure.canvas.draw()  # the layout, then the labels' sizes are known: keep it as it is
+    figure.set_layout_engine("none")
+    for ax in axes:
+        _spread_labels(ax, figure.canvas.get_renderer())
+    return figure
 
 
-__all__ = ["Section", "Workspace", "boundary_labels", "plot_workspace", "solve_tips", "tool_axis", "workspace"]
+def _spread_labels(ax: Any, renderer: Any) -> None:
+    """Move the labels of ``ax`` (pixels) into its frame, then each clear of those before it,
+    stepping along its edge point's column by a label's height."""
+    frame = ax.get_window_extent(renderer)
+    placed: list[Any] = []
+    for text in ax.texts:
+        box = text.get_window_extent(renderer)
+        dx = max(frame.x0 + 2 - box.x0, 0) + min(frame.x1 - 2 - box.x1, 0)
+        dy = max(frame.y0 + 2 - box.y0, 0) + min(frame.y1 - 2 - box.y1, 0)
+        step = box.height + 2
+        tries = [dy + sign * k * step for k in range(int(frame.height // step) + 1) for sign in (1, -1)]
+        for offset in tries:
+            moved = box.translated(dx, offset)
+            if frame.y0 <= moved.y0 and moved.y1 <= frame.y1 and not any(moved.overlaps(p) for p in placed):
+                dy = offset
+                break
+        text.xyann = (dx, dy)
+        placed.append(box.translated(dx, dy))
+
+
+__all__ = ["Section", "Workspace", "boundary_labels", "plot_workspace", "solve_tips", "tool_axis", "workspace",
+           "workspace_figure"]

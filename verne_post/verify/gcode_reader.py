@@ -355,6 +355,9 @@ class _Interpreter:
             elif g == 40:
                 if "P" not in values:
                     raise self.fail(number, "G4 dwell without P")
+            elif g in self.facts.work_offsets:
+                raise self.fail(number, f"G{g / 10:g} selects a work offset, which would shift the joints' "
+                                        f"positions (the part's offset is the post's: work_offset, --work-offset)")
             elif g not in self.facts.harmless:
                 raise self.fail(number, f"G{g / 10:g} is not supported: a joint-space program uses G0/G1 in "
                                         f"absolute distance (G90) without offsets")
