@@ -566,3 +566,46 @@ def test_a_tool_without_a_number_gets_the_machine_files_tool_number(tmp_path: Pa
     assert not any("BY HAND" in line or "TOOL 0" in line for line in lines)
     program = read_gcode("\n".join(lines) + "\n", controller=machine.controller.profile())
     assert set(program.tool[~np.isnan(program.joints).all(axis=1)][1:]) == {7}
+
+
+# --- The controller's pace and path control (issue 33) ----------------------------------------------
+
+def _block_seconds(text: str) -> np.ndarray:
+    """Each G93 block's duration (s) as the controller reads it: 60 / F (inverse time)."""
+    return np.array([60.0 / float(m.group(1)) for line in text.splitlines()
+                     if (m := re.search(r"^(?:N\d+\s*)?G1\b.*\bF([0-9.]+)", _code(line)))])
+
+
+def test_block_time_gives_every_block_at_least_that_long(tmp_path: Path) -> None:
+    """With controller.block_time the program's F words ask no block for less than that time (read
+    back from the text), the header's cycle time grows accordingly and says so."""
+    _, _, plain = _post(tmp_path, "  dialect: fanuc\n")
+    slow_dir = tmp_path / "slow"
+    slow_dir.mkdir()
+    _, _, slow = _post(slow_dir, "  dialect: fanuc\n  block_time: 0.05\n")
+    before, after = _block_seconds(plain), _block_seconds(slow)
+    assert before.min() < 0.05 - 1e-3  # the test can fail: some block was planned shorter
+    assert after.min() >= 0.05 * (1 - 1e-6)
+    cycle = [float(re.search(r"CYCLE TIME (\d+\.\d+) S", t).group(1)) for t in (plain, slow)]
+    assert cycle[1] > cycle[0]
+    assert "AT LEAST 50 MS A BLOCK" in slow and "BLENDING NOT MODELLED" in slow
+
+
+@pytest.mark.parametrize(("dialect", "lines"), [
+    ("sinumerik", '["TRAFOOF", "G71 G90 G17 G40 G94", "G642", "COMPCAD", "SOFT"]'),
+    ("fanuc", '["G21 G90 G17 G40 G49 G80 G94", "G05.1 Q1", "G08 P1"]'),
+])
+def test_path_control_codes_of_the_vendors_are_written_and_read(tmp_path: Path, dialect: str, lines: str) -> None:
+    """The documented path-control codes (SINUMERIK's G642 rounding and COMPCAD compressor, FANUC's
+    AI contour control G05.1 Q1 and look-ahead G08 P1) can stand in program_start: the post writes
+    them and verify, reading with the same profile, certifies the program."""
+    _, _, text = _post(tmp_path, f"  dialect: {dialect}\n  program_start: {lines}\n")
+    for line in json.loads(lines):
+        assert any(_code(written) == line for written in text.splitlines()), line
+
+
+def test_a_g5_1_is_still_refused_on_linuxcnc(tmp_path: Path) -> None:
+    """G5.1 is a quadratic spline on LinuxCNC, not path control: its line is refused at the YAML line."""
+    path = _machine_file(tmp_path, '  dialect: linuxcnc\n  program_start: ["G21 G90", "G5.1 Q1"]\n')
+    with pytest.raises(InputError, match=r"G5\.1"):
+        vp.load_machine(path)

@@ -351,3 +351,49 @@ def test_linuxcnc_keeps_the_tip_on_the_path_at_rotary_corners(tmp_path: Path, mo
     without = path_deviation(machine, plain.read_text(), simulate(plain, machine, time_scale=TIME_SCALE))
     assert without.feeds > 3 * tol, without.feeds
     assert with_guards.feeds <= tol, (with_guards.feeds, with_guards.worst_line)
+
+
+def test_deviation_from_the_cl_path_and_time_per_block(run: SimulationResult, posted: Path, machine: vp.Machine,
+                                                      tmp_path: Path) -> None:
+    """``simulate --against``: the executed tip against the CL file's feed moves agrees with a brute
+    force over the samples here (the CL points read from the CL text, offset by the header's work
+    offset); the time per block adds up to the time LinuxCNC ran lines, and the JSON report has it."""
+    from verne_post.linuxcnc.measures import block_times, cl_deviation, program_blocks
+
+    text = posted.read_text()
+    offset = np.array(program_blocks(text, machine).work_offset)
+    points, rapid, is_rapid = [], [], False
+    for line in _CL.splitlines():
+        if line == "RAPID":
+            is_rapid = True
+        elif line.startswith("GOTO/"):
+            points.append([float(v) for v in line[5:].split(",")[:3]])
+            rapid.append(is_rapid)
+            is_rapid = False
+    tips, rapid = np.array(points) + offset, np.array(rapid)
+    measured = cl_deviation(machine, text, run, tips, rapid)
+    feed = np.isfinite(measured.deviation)
+    assert feed.sum() > 100
+    sample_tips = forward_kinematics(machine, run.joints[feed], tool_length=TOOL_LENGTH).tip
+    a, b = tips[:-1][~rapid[1:]], tips[1:][~rapid[1:]]
+    ab = b - a
+    u = np.clip(np.einsum("sij,ij->si", sample_tips[:, None, :] - a[None], ab) / np.einsum("ij,ij->i", ab, ab),
+                0.0, 1.0)
+    brute = np.linalg.norm(a[None] + u[..., None] * ab[None] - sample_tips[:, None, :], axis=2).min(axis=1)
+    np.testing.assert_allclose(measured.deviation[feed], brute, atol=1e-9)
+    assert measured.feeds == pytest.approx(brute.max())
+
+    times = block_times(machine, text, run)
+    running = run.line > 0
+    assert times.executed.sum() == pytest.approx(running.sum() * run.period, abs=1e-9)
+    assert sum(b[1] for b in times.bins) == np.isfinite(times.planned).sum()
+
+    report = tmp_path / "r.json"
+    cl = tmp_path / "short.cls"
+    cl.write_text(_CL)
+    result = CliRunner().invoke(main, ["simulate", str(posted), "--against", str(cl), "--time-scale", "5",
+                                       "--report", str(report)])
+    assert result.exit_code == 0, result.output
+    assert "off the CL path" in result.output and "time per block" in result.output
+    payload = json.loads(report.read_text())
+    assert payload["cl_deviation_mm"]["feeds"] >= 0 and len(payload["blocks"]["line"]) > 5

@@ -312,6 +312,10 @@ class ControllerConfig(BaseModel):
     tool_number: Annotated[int, Field(ge=1, le=10**9)] | None = None
     """The number of a CL tool without one (NX's TLDATA without LOAD/TOOL): its tool change is written
     with it (absent: the tool is loaded by hand; the tool_change lines are written without T and M6)."""
+    block_time: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
+    """Seconds: the least time the controller takes for a block (its block processing time, from the
+    control's data sheet; e.g. 0.001): the timing gives every block at least this, so that F asks for
+    what the control can do and the header's cycle time is its. 0: not modelled."""
     split: Literal["tool"] | None = None
     """tool: one program file per tool, part_1_T2.nc, part_2_T5.nc, ... (each starts where the one before ends)."""
     m_codes: MCodesConfig = MCodesConfig()
@@ -336,6 +340,7 @@ class ControllerConfig(BaseModel):
             block_numbers=(numbers.start, numbers.step) if isinstance(numbers, BlockNumbers) else None,
             optional_stop=self.optional_stop,
             max_line_length=self.max_line_length or base.max_line_length,
+            block_time=self.block_time,
             split=self.split,
             m_codes=replace(base.m_codes, **{k: v for k, v in self.m_codes.model_dump().items() if v is not None}),
         )

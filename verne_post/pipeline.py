@@ -164,7 +164,7 @@ class Part:
                                 rapid_tol=options.rapid_tol, blend_tolerance=blending)
         if len(guarded.owner) == len(self.rapid):
             return self, timed
-        duration = split_durations(guarded, timed.duration, Limits.from_machine(machine))
+        duration = split_durations(guarded, timed.duration, Limits.from_machine(machine), profile.block_time)
         return replace(self, blocks=guarded.blocks, rapid=guarded.rapid), replace(timed, duration=duration)
 
     def timed(self, wanted: bool = True) -> Timing:
@@ -280,7 +280,7 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
                 poses.sequence[blocks.pose], poses.line[blocks.pose], duration, Limits.from_machine(machine),
                 np.radians(machine.timing.rotary_feed) / 60.0, np.radians(machine.timing.corner_angle),
                 options.planner, options.optimize, options.workers, figures, rapid_speed_limit(machine),
-                machine.controller.profile().dialect))
+                machine.controller.profile().dialect, machine.controller.block_time))
             lap("timing")
         yield Part(first, cut, path, blocks, rapid, duration, planning, context, checks, others, warnings)
         state, last = solved.state_at(cut - first - 1), solved.rows(slice(cut - first - 1, cut - first))
@@ -615,8 +615,11 @@ def _controller_model(machine: Machine, options: PostOptions) -> str:
     certificate and the cycle time assume (docs/linuxcnc.md, docs/controllers.md)."""
     profile = machine.controller.profile()
     model = "CONTROLLER MODEL: EACH BLOCK ON ITS STRAIGHT JOINT-SPACE LINE"
+    if profile.block_time > 0:
+        model += f", AT LEAST {1000 * profile.block_time:g} MS A BLOCK"
     if profile.dialect != "linuxcnc":
-        return f"{model}; {profile.dialect.upper()} BLENDING AND BLOCK RATE NOT MODELLED"
+        return f"{model}; {profile.dialect.upper()} BLENDING NOT MODELLED" + (
+            "" if profile.block_time > 0 else ", NOR ITS BLOCK RATE")
     blending = blend_tolerance(profile.program_start, options.tol)
     if blending is None:
         return f"{model}; LINUXCNC 2.9 EXACT PATH (G61)"

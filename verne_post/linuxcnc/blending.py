@@ -193,8 +193,10 @@ def _with_guards(blocks: Blocks, rapid: np.ndarray, guard_before: np.ndarray, gu
     return Guarded(guarded, rapid[owner], owner, piece)
 
 
-def split_durations(guarded: Guarded, duration: np.ndarray, limits: Limits) -> np.ndarray:
+def split_durations(guarded: Guarded, duration: np.ndarray, limits: Limits, block_time: float = 0.0) -> np.ndarray:
     """(M',) s: each row's share of its block's ``duration`` (s, per given block), at least the
-    least time LinuxCNC takes for it (:func:`~verne_post.planning.controller.rotary_block_floor`)."""
+    least time LinuxCNC takes for it (:func:`~verne_post.planning.controller.rotary_block_floor`)
+    and ``block_time`` (s)."""
     own = guarded.piece * duration[guarded.owner]
-    return np.where(guarded.piece < 1.0, np.maximum(own, rotary_block_floor(guarded.blocks.joints, limits)), own)
+    least = np.maximum(rotary_block_floor(guarded.blocks.joints, limits), block_time)
+    return np.where(guarded.piece < 1.0, np.maximum(own, least), own)

@@ -147,6 +147,7 @@ class Controller:
     block_numbers: tuple[int, int] | None = None
     optional_stop: bool = False
     max_line_length: int = 252
+    block_time: float = 0.0  # s: the least time a block takes (block processing time); 0: not modelled
     max_block_number: int | None = None  # beyond it, block numbers wrap to ``start``
     max_inverse_time_feed: float | None = None  # 1/min: a shorter block is written at this F (slower)
     max_feed_decimals: int | None = None  # of the inverse-time F word
@@ -211,7 +212,11 @@ DIALECTS: Mapping[str, Controller] = {
         max_inverse_time_feed=9999.999,
         max_feed_decimals=3,
         program_numbers=(1, 9999),
-        reader=replace(ReaderFacts(), semicolon_comments=False, program_number=True),
+        # G05.1 Q1 / Q0: AI contour control on / off; G08 P1 / P0: advanced preview control (look-ahead)
+        # on / off (FANUC Series 30i/31i/32i-MODEL A Operator's Manual B-63944EN, "AI contour control",
+        # "Advanced preview control"): path control, written in program_start where the shop wants it.
+        reader=replace(ReaderFacts(), semicolon_comments=False, program_number=True,
+                       harmless=ReaderFacts().harmless | {51, 80}),
     ),
     "sinumerik": Controller(
         "sinumerik",
@@ -220,12 +225,20 @@ DIALECTS: Mapping[str, Controller] = {
         program_start=("TRAFOOF", "G71 G90 G17 G40 G94"),
         tool_change=("T{tool}", "M6", "D0"),
         max_line_length=512,
+        # Path control, written in program_start where the shop wants it (docs/controllers.md):
+        # G64 continuous path, G642/G645 rounding within the axes' tolerances of machine data, G60
+        # exact stop; COMPON/COMPCURV/COMPCAD/COMPOF the NC block compressor, SOFT/BRISK jerk
+        # limitation (SINUMERIK 840D Programming Manual "Job planning", 03/2006, 6FC5398-2BP10-1BA0,
+        # 5.4 "Compressor (COMPOF/ON, COMPCURV, COMPCAD)"; Function Manual Basic Functions B1
+        # "Continuous-path mode, exact stop, LookAhead", 09/2011, 6FC5397-0BP40-2BA0).
         reader=ReaderFacts(metric=frozenset({710, 7100}), inch=frozenset({700, 7000}),
-                           harmless=frozenset({170, 180, 190, 400, 600, 640, 900}),
+                           harmless=frozenset({170, 180, 190, 400, 600, 640, 900, 6420, 6450}),
                            # G54 to G57, G500 and G505 to G599: settable frames ("NC programming" 12/2019,
                            # "Settable zero offset"); the frame of G500 need not be zero
                            work_offsets=frozenset({540, 550, 560, 570, 5000, *range(5050, 6000, 10)}),
-                           parenthesis_comments=False, cutting_edge_off=True, keywords=frozenset({"TRAFOOF"})),
+                           parenthesis_comments=False, cutting_edge_off=True,
+                           keywords=frozenset({"TRAFOOF", "COMPON", "COMPCURV", "COMPCAD", "COMPOF", "SOFT",
+                                               "BRISK"})),
     ),
 }
 

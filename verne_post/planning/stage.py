@@ -109,6 +109,7 @@ class TimingTask:
     figures: bool  # also the planner's figures for the report (:meth:`Timing.with_figures`)
     rapid_speed: float = NO_TIP_LIMIT  # mm/s: the tip speed limit of rapids (machine's safe.rapid_feed)
     controller: str | None = None  # a dialect whose planner's floor the durations keep (planning.controller)
+    block_time: float = 0.0  # s: the controller's least time per block (its block processing time)
 
 
 def plan_timing(task: TimingTask) -> Timing:
@@ -126,6 +127,8 @@ def plan_timing(task: TimingTask) -> Timing:
     duration = schedule.duration
     if task.controller in MODELLED:  # the controller's own planner cannot run a block faster
         duration = np.maximum(duration, rotary_block_floor(task.joints, task.limits))
+    if task.block_time > 0:  # nor can it read blocks faster (the first, positioning, block is not timed)
+        duration = np.r_[duration[:1], np.maximum(duration[1:], task.block_time)]
     timed = Timing(duration, schedule, planned=True)
     if task.figures:  # of the planned durations, as the HTML report's
         timed = timed.with_figures(task.joints, task.tip, tip_limit(task.feed, task.inverse_time, task.tip,

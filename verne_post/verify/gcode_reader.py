@@ -361,8 +361,8 @@ class _Interpreter:
             elif g not in self.facts.harmless:
                 raise self.fail(number, f"G{g / 10:g} is not supported: a joint-space program uses G0/G1 in "
                                         f"absolute distance (G90) without offsets")
-        if 640 in g_codes:  # G64 P (blend tolerance, a P word) Q (naive-CAM tolerance): path control only
-            unknown = [word for word in unknown if word[0] != "Q"]
+        if 640 in g_codes or 51 in g_codes:  # G64 P Q (LinuxCNC's blend and naive-CAM tolerances), FANUC's
+            unknown = [word for word in unknown if word[0] != "Q"]  # G05.1 Q1: path control only
         if unknown:  # after the G codes: "G2 is not supported" says more than "I1"
             raise self.fail(number, f"word {unknown[0]}: the VERNE controller has no such word here (axes "
                                     f"{' '.join(self.controller.axes)}; G0/G1 motion)")
