@@ -34,11 +34,12 @@ POSTED = [("nx_zlevel_coremill_mm.cls", "floor"), ("creo8_schruppen_roughing_mm.
           ("nx_swarf_inch_crlf.cls", "box")]
 # nx_swarf chamfers the top edge of a 4 x 4 x 3.5 in block with a 0.75 in end mill tilted 48.6 to
 # 64.7 deg over the block's top face, its tip 8 mm below it. Its TLDATA length, 4.0 in, is the
-# tool's own length (NX mounts the holder on it); read as the gauge, the default holder and spindle
-# would sit 101.6 mm from the tip, and at CL line 49 (64.7 deg) the spindle housing's (170 mm) rim
-# would be 36 mm down in the block, the holder 10 mm (the last test). Posted with this stock box the shortest gauge that
-# clears is 130 mm (129: the holder's 40 mm piece meets the stock at lines 49-51): the 4 in tool
-# clamped 42 mm deep in the 70 mm default holder. The gauge goes in place of the file's length.
+# tool's own length (its gauge adds the holder, less the depth it is clamped in it). Read as the
+# gauge, it puts the default holder and spindle 101.6 mm from the tip: at CL line 49 (64.7 deg)
+# the spindle housing's (170 mm) rim would be 36 mm down in the block, the holder 10 mm (the last
+# test). With this stock box the shortest gauge that posts is 130 mm (129: the holder's 40 mm
+# piece meets the stock at lines 49-51): the 4 in tool clamped 42 mm deep in the 70 mm default
+# holder. A CL length wins over --tool-length, so the gauge goes in place of the file's length.
 SWARF_GAUGE = 130.0  # mm
 TOOL_LENGTH = 100.0
 CUTTER_DIAMETER = 10.0  # mm: the machine file's default cutter where the CL file gives none (asserted)
