@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..api import forward_kinematics
 from ..checks.limits import Violation
 from ..machine import Machine
 from ..motion.linearise import Blocks
@@ -21,16 +22,46 @@ from .timing import Limits
 from .topp import Engine
 
 
+def tip_path_length(machine: Machine, poses: MachinePoses, blocks: Blocks, rows: np.ndarray) -> np.ndarray:
+    """mm: the length of the tool tip's path relative to the part (table frame) along the
+    joint-space line of each block ``rows`` (from the block before), as the controller runs it.
+
+    That path is not the chord of the block's ends: linear joints bend the tip off it (within the
+    tolerance), and the bend adds length, most on short blocks: near the rotary pole a 0.015 mm
+    block whose middle is 1.4 um off its chord is 2.3 % longer than it. To leading order the bend
+    is a parabola along the block (the forward kinematics' second-order term), for which the two
+    chords through the middle miss a quarter of the added length: ``(4 L2 - L1) / 3`` (Richardson,
+    as Simpson's rule) has no error of that order. One forward kinematics per block, at its middle.
+    """
+    rows = np.asarray(rows, dtype=int)
+    lengths = np.zeros(len(rows))
+    rows_after = rows[rows > 0]
+    if rows_after.size == 0:
+        return lengths
+    before, result = rows_after - 1, blocks.result
+    middle = forward_kinematics(machine, 0.5 * (result.joints[before] + result.joints[rows_after]),
+                                tool_length=poses.tool_length[blocks.pose[rows_after]],
+                                alpha_guess=0.5 * (result.alpha[before] + result.alpha[rows_after]))
+    t0, t1 = blocks.tip[before], blocks.tip[rows_after]
+    chord = np.linalg.norm(t1 - t0, axis=1)
+    halves = np.linalg.norm(middle.tip - t0, axis=1) + np.linalg.norm(t1 - middle.tip, axis=1)
+    lengths[rows > 0] = np.where(middle.reachable, halves + (halves - chord) / 3.0, chord)
+    return lengths
+
+
 def block_durations(machine: Machine, poses: MachinePoses, blocks: Blocks, rapid: np.ndarray) -> np.ndarray:
     """Seconds per block before time-parametrisation: programmed feed, never faster than a joint.
 
-    Feed blocks take their Cartesian length over the programmed feed (inverse-time moves their
-    share of 1/F), and at least the time the slowest joint needs at its velocity limit; so a
-    rotary-only block is never of zero duration. Rapids: the joint-limit time.
+    Feed blocks take the length of their tip path (:func:`tip_path_length`, not the chord of
+    their ends) over the programmed feed (inverse-time moves their share of 1/F), and at least the
+    time the slowest joint needs at its velocity limit; so a rotary-only block is never of zero
+    duration. Rapids: the joint-limit time.
     """
     step = np.abs(np.diff(blocks.joints, axis=0, prepend=blocks.joints[:1]))
     joint_time = np.max(step / Limits.from_machine(machine).velocity, axis=1)
-    length = np.linalg.norm(np.diff(blocks.tip, axis=0, prepend=blocks.tip[:1]), axis=1)
+    per_minute = np.flatnonzero(~rapid & ~poses.inverse_time[blocks.pose])
+    length = np.zeros(len(rapid))
+    length[per_minute] = tip_path_length(machine, poses, blocks, per_minute)
     feed = poses.feed[blocks.pose]
     previous = np.r_[0.0, blocks.fraction[:-1]]
     share = np.where(blocks.pose == np.r_[-1, blocks.pose[:-1]], blocks.fraction - previous, blocks.fraction)
