@@ -7,6 +7,7 @@ scanner and circle maths), from the vendors' documented conventions and the real
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from pathlib import Path
@@ -810,9 +811,17 @@ def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path
     with pytest.raises(CheckError) as info:
         read_cl(path)
     assert info.value.line == line and what in info.value.reason
-    result = CliRunner().invoke(main, ["check", str(path), "-q"])
-    assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
-    assert len(result.stderr.splitlines()) == 1
+    for command in (["check"], ["post", "-o", str(tmp_path / "t.nc")]):
+        report = tmp_path / f"{command[0]}.json"
+        result = CliRunner().invoke(main, [*command, str(path), "-q", "--report", str(report)])
+        assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
+        assert len(result.stderr.splitlines()) == 1
+        # as for every exit 3, the report says why (and no program is written)
+        data = json.loads(report.read_text())
+        assert data["ok"] is False and data["source"] == str(path)
+        [violation] = data["violations"]
+        assert violation["line"] == line and what in violation["message"]
+    assert not (tmp_path / "t.nc").exists()
 
 
 def test_mode_mill_is_read(tmp_path: Path) -> None:
