@@ -922,3 +922,20 @@ def test_catia_positional_cycle_with_empty_fields_is_refused_with_its_reason(tmp
                          ",   70.000000,ON,0,0,0\nGOTO/0,0,0,0,0,1\nCYCLE/OFF\n")
     e = refused(tmp_path, text)
     assert e.line == 7 and "PP word table" in e.reason and "empty field in CYCLE" not in e.reason
+
+
+def test_a_tool_length_option_the_cl_file_overrides_is_a_warning(tmp_path: Path) -> None:
+    """NX's TLDATA gives the length (3 inch): --tool-length 100 is not used, and the run says so
+    at the record (the documented precedence: CL file, tool table, --tool-length)."""
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    source = Path(__file__).parent.parent / "examples" / "nx_variable_axis_inch.cls"
+    result = CliRunner().invoke(main, ["check", str(source), "--no-timing", "--tool-length", "100"])
+    assert result.exit_code == 0, result.output
+    tldata = next(i for i, line in enumerate(source.read_text().splitlines(), 1) if line.startswith("TLDATA/"))
+    assert (f"verne-post: warning: {source}:{tldata}: --tool-length 100 not used: the CL file gives tool 0 its "
+            "length, 76.2 mm") in result.stderr
+    quiet = CliRunner().invoke(main, ["check", str(source), "--no-timing", "--tool-length", "76.2"])
+    assert "--tool-length" not in quiet.stderr  # the same length: nothing to tell
