@@ -2,6 +2,7 @@
 
     python -m benchmarks.fuzz [--cases 100000] [--seconds S] [--seed 0] [--timeout 30] [--save DIR]
     python -m benchmarks.fuzz --case K [--seed 0]      # run one case again and show what it did
+    python -m benchmarks.fuzz --reader --cases 1000000 # the CL reader alone (read_toolpath), ~1 ms a case
 
 Seeds: the CL files of tests/data (with the real CAM samples of tests/data/cl-samples) and
 examples/, and machines/verne.yaml. Each case takes a window of a seed's lines, applies a few
@@ -17,6 +18,10 @@ calls the CLI's ``main`` in this process, catching ``SystemExit``. Outcomes:
 - stray file: any file left in the output folder other than the output (and the report) that
   run should leave; a run that says ok without its output counts here too.
 
+With ``--reader`` each case is a mutated CL file only, read by ``read_toolpath`` in this process with
+random reading options: ok (read), bad input (an InputError), violations (a CheckError: a program
+for another machine), crash (any other exception, or an error message that is not one line).
+
 Done means 0 crash, 0 hang, 0 stray file. Feed planning runs in this process (one worker) so
 that a timeout interrupts it; the address space is limited (``--memory-gb``) so that a runaway
 allocation is a crash here instead of the machine's OOM killer. Failing cases are saved under
@@ -26,6 +31,8 @@ allocation is a crash here instead of the machine's OOM killer. Failing cases ar
 from __future__ import annotations
 
 import argparse
+import atexit
+import bisect
 import contextlib
 import io
 import os
@@ -38,6 +45,7 @@ import sys
 import tempfile
 import time
 import traceback
+import unicodedata
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,12 +171,18 @@ def _window(lines: list[bytes], rng: random.Random) -> list[bytes]:
     piece = lines[start:start + rng.randint(3, 60)]
     if rng.random() < 0.15:
         return piece
-    last: dict[bytes, int] = {}
-    for k, line in enumerate(lines[:start]):
-        match = CONTEXT.match(line)
-        if match:
-            last[match.group(1)] = k
-    return [lines[k] for k in sorted(last.values())] + piece
+    if id(lines) not in _CONTEXT_CACHE:  # the seeds' context records, found once
+        found: dict[bytes, list[int]] = {}
+        for k, line in enumerate(lines):
+            match = CONTEXT.match(line)
+            if match:
+                found.setdefault(match.group(1), []).append(k)
+        _CONTEXT_CACHE[id(lines)] = found
+    last = [at[bisect.bisect_left(at, start) - 1] for at in _CONTEXT_CACHE[id(lines)].values() if at[0] < start]
+    return [lines[k] for k in sorted(last)] + piece
+
+
+_CONTEXT_CACHE: dict[int, dict[bytes, list[int]]] = {}  # id of a cached seed's lines -> record -> its lines
 
 
 def _value(rng: random.Random, usual: list[str], weird: list[str], absurd: bool) -> str:
@@ -176,6 +190,66 @@ def _value(rng: random.Random, usual: list[str], weird: list[str], absurd: bool)
 
 
 WEIRD = ["nan", "inf", "-1", "0", "1e999", "1e-300", "abc", "", "1e6"]
+
+
+def make_reader_case(seed: int, number: int) -> Case:
+    """A mutated window of a CL seed, and the reading options (``read_toolpath`` keywords as
+    ``name=value`` arguments) of a reader case."""
+    rng = random.Random(f"reader:{seed}:{number}")
+    donors = [_seed(p) for p in CL_SEEDS]
+    source = rng.choice(CL_SEEDS)
+    lines = _window(_seed(source), rng)
+    for _ in range(rng.choice([0, 1, 1, 2, 3, 5])):
+        lines = mutate_lines(lines, rng, donors, gentle_share=0.4)
+    part = f"part{source.suffix if rng.random() < 0.95 else rng.choice(['.csv', '.txt', ''])}"
+    args = [part]
+    for option, values in (("units", ["mm", "inch"]), ("arc_direction", ["cw", "ccw"]),
+                           ("frame", ["local", "world", "apply"]), ("chordal_tolerance", ["0.001", "0.01", "1e-6"]),
+                           ("feed", ["100", "1000"])):
+        if rng.random() < 0.1:
+            args.append(f"{option}={rng.choice(values)}")
+    return Case(number, {part: b"".join(lines)}, args, {})
+
+
+def run_reader_case(case: Case, timeout: float, keep: Path | None = None) -> Result:
+    """Read the case's CL file with its options; an error must be a UserError of one printable line."""
+    from verne_post.cl import read_toolpath
+    from verne_post.errors import CheckError, UserError
+
+    work = _READER_FOLDER
+    [(name, data)] = case.files.items()
+    (work / name).write_bytes(data)
+    options: dict[str, object] = {}
+    for arg in case.args[1:]:
+        key, value = arg.split("=")
+        options[key] = float(value) if key in ("chordal_tolerance", "feed") else value
+    result = Result("ok")
+    signal.setitimer(signal.ITIMER_REAL, timeout)
+    try:
+        read_toolpath(work / name, **options)
+    except Hang:
+        result = Result("hang", f"over {timeout} s")
+    except UserError as error:
+        text = str(error)
+        outcome = "violations" if isinstance(error, CheckError) else "bad input"
+        one_line = not any(unicodedata.category(ch) in ("Cc", "Zl", "Zp", "Cf", "Cs", "Co", "Cn") for ch in text)
+        result = Result(outcome, text) if one_line else Result("crash", text, "message format")
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # counting every crash is the point
+        frames = [f for f in traceback.extract_tb(exc.__traceback__) if "verne_post" in f.filename]
+        where = f"{Path(frames[-1].filename).relative_to(ROOT)}:{frames[-1].lineno}" if frames else "?"
+        result = Result("crash", "".join(traceback.format_exception(exc)), f"{type(exc).__name__} at {where}")
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+    if keep is not None and result.outcome in ("crash", "hang"):
+        _save(case, result, keep, "")
+    (work / name).unlink()
+    return result
+
+
+_READER_FOLDER = Path(tempfile.mkdtemp(prefix="verne-fuzz-reader-"))  # one file at a time; removed at exit
+atexit.register(shutil.rmtree, _READER_FOLDER, True)
 
 
 def make_case(seed: int, number: int) -> Case:
@@ -323,15 +397,17 @@ def main() -> None:
     parser.add_argument("--save", type=Path, default=Path(tempfile.gettempdir()) / "verne-fuzz",
                         help="folder for failing cases")
     parser.add_argument("--case", type=int, default=None, help="run only this case and print what happened")
+    parser.add_argument("--reader", action="store_true", help="fuzz the CL reader alone (read_toolpath)")
     args = parser.parse_args()
+    make, run = (make_reader_case, run_reader_case) if args.reader else (make_case, run_case)
 
     os.cpu_count = lambda: 1  # feed planning in this process: the per-case timer can interrupt it
     _limit_memory(args.memory_gb)
     signal.signal(signal.SIGALRM, _on_timer)
     if args.case is not None:
-        case = make_case(args.seed, args.case)
+        case = make(args.seed, args.case)
         print("args:", " ".join(case.args), "\nfiles:", {k: len(v) for k, v in case.files.items()})
-        result = run_case(case, args.timeout, keep=args.save)
+        result = run(case, args.timeout, keep=args.save)
         print(f"{result.outcome}: {result.where}\n{result.detail}")
         return
 
@@ -342,7 +418,7 @@ def main() -> None:
     for number in range(args.cases):
         if args.seconds is not None and time.perf_counter() - start > args.seconds:
             break
-        result = run_case(make_case(args.seed, number), args.timeout, keep=args.save)
+        result = run(make(args.seed, number), args.timeout, keep=args.save)
         counts[result.outcome] += 1
         done += 1
         if result.outcome in ("crash", "hang", "stray file"):
@@ -352,13 +428,15 @@ def main() -> None:
     elapsed = time.perf_counter() - start
     if sys.stderr.isatty():
         print(file=sys.stderr)
-    print(f"{done} cases in {elapsed:.0f} s ({1000 * elapsed / max(done, 1):.0f} ms each), seed {args.seed}")
+    print(f"{done} {'reader ' if args.reader else ''}cases in {elapsed:.0f} s ({1000 * elapsed / max(done, 1):.1f} "
+          f"ms each), seed {args.seed}")
     for outcome in OUTCOMES:
         print(f"  {outcome:<11} {counts[outcome]}")
     for signature, numbers in sorted(signatures.items(), key=lambda item: -len(item[1])):
         print(f"  {len(numbers):>6} x {signature}   (cases {', '.join(map(str, numbers[:5]))})")
     if signatures:
-        print(f"failing cases saved in {args.save}; run one again with --case N --seed {args.seed}")
+        print(f"failing cases saved in {args.save}; run one again with --case N --seed {args.seed}"
+              f"{' --reader' if args.reader else ''}")
     sys.exit(1 if any(counts[o] for o in ("crash", "hang", "stray file")) else 0)
 
 

@@ -11,11 +11,14 @@ Other families: the peck depths are worked out by hand from the definitions in t
 from __future__ import annotations
 
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from verne_post.cl.cycles import MAX_PECKS, CycleSpec, approach_moves, cycle_moves, parse_cycle, reactivated
+from verne_post.cli import main
 
 
 def raises(message: str):
@@ -367,8 +370,20 @@ def test_rejections(record: str, message: str) -> None:
 
 def test_bounded_pecks_and_bad_axis() -> None:
     spec = parse_cycle(["DEEP", "DEPTH", 1000.0, "STEP", 0.001, "CLEAR", 1.0])
-    with raises(f"cycle needs more than {MAX_PECKS} pecks"):
+    with raises(f"a hole 1000 deep in pecks of 0.001 needs more than {MAX_PECKS} pecks: check the depth and the peck "
+                "depth"):
         cycle_moves(spec, np.zeros(3), np.array([0.0, 0.0, 1.0]))
     spec = parse_cycle(["DRILL", "DEPTH", 1.0, "CLEAR", 1.0])
     with raises("cycle needs a finite hole top and a non-zero tool axis"):
         cycle_moves(spec, np.zeros(3), np.zeros(3))
+
+
+def test_a_hole_of_too_many_pecks_is_an_error_at_its_cycle_record(tmp_path: Path) -> None:
+    """A fuzzed DEEP cycle, 1000 mm in pecks of 1 micrometre: one line at the CYCLE record, exit 2."""
+    path = tmp_path / "pecks.cls"
+    path.write_text("PARTNO/PECKS\nUNITS/MM\nLOADTL/1\nFEDRAT/MMPM,100\nGOTO/0,0,50,0,0,1\n"
+                    "CYCLE/DEEP,DEPTH,1000,STEP,0.001,CLEAR,1\nGOTO/10,10,0,0,0,1\nCYCLE/OFF\nFINI\n")
+    result = CliRunner().invoke(main, ["check", str(path), "-q", "--no-timing"])
+    assert result.exit_code == 2
+    assert result.output == (f"verne-post: error: {path}:6: CYCLE/DEEP: a hole 1000 deep in pecks of 0.001 needs "
+                             f"more than {MAX_PECKS} pecks: check the depth and the peck depth\n")

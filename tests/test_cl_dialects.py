@@ -7,6 +7,7 @@ scanner and circle maths), from the vendors' documented conventions and the real
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from pathlib import Path
@@ -810,9 +811,17 @@ def test_programs_for_another_kind_of_machine_are_refused_as_such(tmp_path: Path
     with pytest.raises(CheckError) as info:
         read_cl(path)
     assert info.value.line == line and what in info.value.reason
-    result = CliRunner().invoke(main, ["check", str(path), "-q"])
-    assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
-    assert len(result.stderr.splitlines()) == 1
+    for command in (["check"], ["post", "-o", str(tmp_path / "t.nc")]):
+        report = tmp_path / f"{command[0]}.json"
+        result = CliRunner().invoke(main, [*command, str(path), "-q", "--report", str(report)])
+        assert result.exit_code == 3 and result.stderr.startswith(f"verne-post: error: {path}:{line}: ")
+        assert len(result.stderr.splitlines()) == 1
+        # as for every exit 3, the report says why (and no program is written)
+        data = json.loads(report.read_text())
+        assert data["ok"] is False and data["source"] == str(path)
+        [violation] = data["violations"]
+        assert violation["line"] == line and what in violation["message"]
+    assert not (tmp_path / "t.nc").exists()
 
 
 def test_mode_mill_is_read(tmp_path: Path) -> None:
@@ -913,3 +922,20 @@ def test_catia_positional_cycle_with_empty_fields_is_refused_with_its_reason(tmp
                          ",   70.000000,ON,0,0,0\nGOTO/0,0,0,0,0,1\nCYCLE/OFF\n")
     e = refused(tmp_path, text)
     assert e.line == 7 and "PP word table" in e.reason and "empty field in CYCLE" not in e.reason
+
+
+def test_a_tool_length_option_the_cl_file_overrides_is_a_warning(tmp_path: Path) -> None:
+    """NX's TLDATA gives the length (3 inch): --tool-length 100 is not used, and the run says so
+    at the record (the documented precedence: CL file, tool table, --tool-length)."""
+    from click.testing import CliRunner
+
+    from verne_post.cli import main
+
+    source = Path(__file__).parent.parent / "examples" / "nx_variable_axis_inch.cls"
+    result = CliRunner().invoke(main, ["check", str(source), "--no-timing", "--tool-length", "100"])
+    assert result.exit_code == 0, result.output
+    tldata = next(i for i, line in enumerate(source.read_text().splitlines(), 1) if line.startswith("TLDATA/"))
+    assert (f"verne-post: warning: {source}:{tldata}: --tool-length 100 not used: the CL file gives tool 0 its "
+            "length, 76.2 mm") in result.stderr
+    quiet = CliRunner().invoke(main, ["check", str(source), "--no-timing", "--tool-length", "76.2"])
+    assert "--tool-length" not in quiet.stderr  # the same length: nothing to tell

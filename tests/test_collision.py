@@ -170,3 +170,24 @@ def test_verify_finds_the_clamp_a_program_was_posted_without(tmp_path: Path) -> 
     # block before it short of there (blocks are about 1 mm of travel)
     assert tip_x(found[0]) + 0.5 * DIAMETER >= 20.0 - 1.0
     assert tip_x(found[0] - 1) + 0.5 * DIAMETER <= 20.0 + 1.0
+
+
+def test_a_coordinate_kilometres_away_is_a_limit_violation_not_bodies_bisected(tmp_path: Path) -> None:
+    """A corrupt GOTO (z = 1e7 mm, from the pipeline fuzzer): its sliders are kilometres beyond
+    their travel. The limit check reports it; no bodies are placed there (on main the clearance
+    bisected the metres-long moves for minutes and reported the legs meeting)."""
+    from verne_post.api import joint_bounds, placeable
+
+    text = ("PARTNO/FAR\nUNITS/MM\nLOADTL/1\nFEDRAT/MMPM,250\nGOTO/0,0,50,0,0,1\nGOTO/10,0,50,0,0,1\n"
+            "GOTO/20,0,1e7,0,0,1\nGOTO/30,0,50,0,0,1\nGOTO/40,0,50,0,0,1\n")
+    path = tmp_path / "far.cls"
+    path.write_text(text)
+    result = CliRunner().invoke(main, ["check", str(path), "--no-timing", "--tool-length", "50", "-q"])
+    assert result.exit_code == 3
+    assert f"{path}:7: slider rho1 = " in result.stderr and "meets" not in result.stderr
+    machine = vp.load_machine()
+    lower, _ = joint_bounds(machine)
+    inside = np.where(np.isfinite(lower), lower, 0.0)
+    joints = np.array([inside, inside - [3000.0, 0, 0, 0, 0], inside - [1000.0, 0, 0, 0, 0]])
+    placed = placeable(machine, joints)
+    assert np.isnan(placed[1]).all() and np.array_equal(placed[[0, 2]], joints[[0, 2]])

@@ -216,6 +216,21 @@ def test_sinumerik_preset(tmp_path: Path) -> None:
         read_gcode("G21\n", controller=profile)
 
 
+def test_verify_without_machine_names_the_machine_file_of_the_header(tmp_path: Path) -> None:
+    """A SINUMERIK program verified without --machine (the default LinuxCNC profile): the error at
+    its first foreign line says which machine file the header names and that --machine reads it."""
+    cl = tmp_path / "part.cls"
+    cl.write_text(TOOLS_CL)
+    target = tmp_path / "part.mpf"
+    machine = vp.load_machine(_machine_file(tmp_path, "  dialect: sinumerik\n", "shop.yaml"))
+    assert post(cl, machine, PostOptions(), target).verification.ok
+    result = CliRunner().invoke(main, ["verify", str(target)])
+    assert result.exit_code == 2 and len(result.stderr.splitlines()) == 1
+    assert result.stderr.rstrip().endswith("the program's header names the machine file shop.yaml: --machine "
+                                           "shop.yaml reads it with that file's controller profile")
+    assert CliRunner().invoke(main, ["verify", str(target), "--machine", str(tmp_path / "shop.yaml")]).exit_code == 0
+
+
 def test_linuxcnc_has_no_program_number_line(tmp_path: Path) -> None:
     """O words are subroutine labels in LinuxCNC: a program number only fills {program}."""
     _, _, text = _post(tmp_path, "  dialect: linuxcnc\n  program_number: 77\n")

@@ -10,7 +10,11 @@ compared with LinuxCNC's interpreter on randomly formatted programs.
 from __future__ import annotations
 
 import json
+import os
 import re
+import resource
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -490,3 +494,63 @@ def test_cl_points_take_the_earliest_block_at_or_after_the_one_before() -> None:
                 later = near[near >= previous]
                 previous = expected[p] = later[0] if later.size else near[-1]
         np.testing.assert_array_equal(matched, expected)
+
+
+# ---------------------------------------------------------------------------------------------
+# a program that does not follow its CL path (another CL file, machine file or work offset)
+
+_PEAK = 1 << 30  # bytes: the peak resident memory a verification may take (the issue's bound, 1 GB)
+_CAP = 4 << 30  # bytes of address space: a run that would need more stops (MemoryError) instead of the machine
+
+
+def _verify_bounded(program: Path, *args: str) -> tuple[int, str]:
+    """``verne-post verify`` in a process of its own, its address space capped; its exit status
+    and stderr, after checking that its peak resident memory (the kernel's) stayed under 1 GiB."""
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (_CAP, _CAP))
+
+    process = subprocess.Popen([sys.executable, "-m", "verne_post", "verify", str(program), *args],
+                               stderr=subprocess.PIPE, text=True, preexec_fn=cap,
+                               env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
+    stderr = process.stderr.read() if process.stderr else ""
+    _, status, usage = os.wait4(process.pid, 0)
+    assert usage.ru_maxrss * 1024 < _PEAK, f"peak {usage.ru_maxrss >> 10} MiB"
+    return os.waitstatus_to_exitcode(status), stderr
+
+
+@pytest.mark.parametrize("args", [["--against", str(EXAMPLES / "nx_swarf_inch_crlf.cls")],
+                                  ["--against", str(EXAMPLES / "impeller_5axis.cls"), "--work-offset", "1", "0", "0"]],
+                         ids=["another CL file", "another work offset"])
+def test_a_program_that_follows_another_path_says_so_first(posted: dict[str, Path], tmp_path: Path,
+                                                          args: list[str]) -> None:
+    """The impeller's program checked against the wrong CL file, or 1 mm off: the poses are not
+    reached at all; one line says so, with the counts, in a bounded process."""
+    report = tmp_path / "r.json"
+    status, stderr = _verify_bounded(posted["impeller_5axis"], *args, "--report", str(report))
+    assert status == 3, stderr[-2000:]
+    first = stderr.splitlines()[0]
+    poses = len(read_toolpath(args[1]))
+    assert re.search(rf"impeller_5axis\.nc:\d+: 0 of {poses} CL points reached: .*another CL file, machine file "
+                     r"or work offset\?$", first), first
+    assert "rapid where the CL path feeds" not in stderr
+    data = _no_nan(report.read_text())
+    assert data["cl_points_reached"] == 0 and data["findings"][0]["kind"] == "mismatch"
+
+
+def test_a_program_that_leaves_its_path_midway_stays_bounded(posted: dict[str, Path], tmp_path: Path) -> None:
+    """The last 40 % of the impeller's feed blocks moved 1 mm in X: the first finding is where it
+    leaves the path, and the rest (thousands of poses, each a finding) fits in the bounded process."""
+    lines = posted["impeller_5axis"].read_text().splitlines()
+    start = int(0.6 * len(lines))
+    moved = [re.sub(r"^(G1 X)(-?[\d.]+)", lambda m: f"{m.group(1)}{float(m.group(2)) + 1.0:.4f}", line)
+             if i >= start else line for i, line in enumerate(lines)]
+    program = tmp_path / "moved.nc"
+    program.write_text("\n".join(moved) + "\n")
+    report = tmp_path / "r.json"
+    status, stderr = _verify_bounded(program, "--against", str(EXAMPLES / "impeller_5axis.cls"), "--report",
+                                     str(report))
+    assert status == 3, stderr[-2000:]
+    data = _no_nan(report.read_text())
+    first_moved = next(i + 1 for i in range(start, len(lines)) if moved[i] != lines[i])
+    assert first_moved - 1 <= data["findings"][0]["line"] <= first_moved + 1
+    assert 0 < data["cl_points_reached"] < data["cl_points"]

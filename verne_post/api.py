@@ -54,6 +54,16 @@ def joint_bounds(machine: Machine) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lower), np.array(upper)
 
 
+def placeable(machine: Machine, joints: np.ndarray) -> np.ndarray:
+    """(N, 5) mm, rad: ``joints`` with NaN rows where a joint is beyond its travel by more than the
+    travel itself (kilometres of slider from a corrupt coordinate): no bodies are placed there,
+    the limit check reports those poses, and their metres-long moves would be bisected without end."""
+    lower, upper = joint_bounds(machine)
+    span = np.where(np.isfinite(upper - lower), upper - lower, np.inf)
+    absurd = np.any((joints < lower - span) | (joints > upper + span), axis=-1)
+    return np.where(absurd[:, None], np.nan, joints)
+
+
 def within_limits(machine: Machine, joints: np.ndarray) -> np.ndarray:
     """True where every joint of (N, 5) (mm, rad) is inside the machine's travel."""
     lower, upper = joint_bounds(machine)

@@ -8,8 +8,9 @@ import unicodedata
 #: Longest quoted token kept whole in a message (characters after escaping); longer ones are cut.
 MAX_TOKEN_CHARS = 40
 
-#: Longest reason kept whole: a message stays one readable line whatever the input held.
-MAX_REASON_CHARS = 300
+#: Longest reason kept whole: a message stays one line whatever the input held. The project's own
+#: reasons (with their remedies) stay well within it; input in them is cut as a quoted token is.
+MAX_REASON_CHARS = 1000
 
 # A token quoted in a message: 'text' not inside a word (so "machine's" does not open one).
 _QUOTED = re.compile(r"(?<!\w)'(.*?)'(?!\w)", re.DOTALL)
@@ -42,7 +43,8 @@ def _escaped(text: str, limit: int | None = None) -> str:
 
 def one_line(text: str, limit: int | None = None) -> str:
     """``text`` as one printable line: control and line-separator characters escaped (a newline
-    reads ``\\x0a``), each quoted token cut to :data:`MAX_TOKEN_CHARS`, the whole to ``limit``."""
+    reads ``\\x0a``), each quoted token cut to :data:`MAX_TOKEN_CHARS`, the whole to ``limit``
+    by its middle: the start says what and where, the end what to do about it."""
     out, position = [], 0
     for match in _QUOTED.finditer(text):
         out.append(_escaped(text[position:match.start()]))
@@ -50,7 +52,10 @@ def one_line(text: str, limit: int | None = None) -> str:
         position = match.end()
     out.append(_escaped(text[position:]))
     line = "".join(out)
-    return line if limit is None or len(line) <= limit else line[: limit - 3] + "..."
+    if limit is None or len(line) <= limit:
+        return line
+    head = (limit - 5) // 2
+    return f"{line[:head]} ... {line[len(line) - (limit - 5 - head):]}"
 
 
 def quote(token: object) -> str:

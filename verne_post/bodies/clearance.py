@@ -208,7 +208,9 @@ def _bisect(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np.ndar
         lb = 0.5 * (d0 + d1 - move)
         # Branch and bound on the block's least clearance: a stretch whose bound is not below the
         # least sampled clearance so far (a collision found: 0) cannot hold a smaller one.
-        split = (lb < margin) & (lb < best[owner] - RESOLUTION) & (move > RESOLUTION) & (level < MAX_LEVELS)
+        # A block whose bodies were found to meet (0, the least there is) is settled.
+        split = ((lb < margin) & (lb < best[owner] - RESOLUTION) & (best[owner] > 0.0) & (move > RESOLUTION)
+                 & (level < MAX_LEVELS))
         stop = np.flatnonzero((lb < margin) & ~split)  # resolved: its bound is the clearance there
         low = np.maximum(lb[stop], 0.0)
         better = low < best[owner[stop]]

@@ -59,6 +59,7 @@ def cycle(st: ReaderState, rec: Record) -> None:
         kind = str(toks[0])
     try:
         spec = cycles.parse_cycle(toks, autodesk=st.dialect.cycle_point == "bottom")
+        cycles.peck_depths(spec.depth, spec.pecks)  # a hole of too many pecks refused here, at its record
     except ValueError as error:
         reason = str(error)
         raise st.fail(reason if reason.startswith("CYCLE") else f"CYCLE/{kind[:20]}: {reason}", rec.line) from None
@@ -97,7 +98,10 @@ def drill(st: ReaderState, p: list[float], a: tuple[float, float, float], line: 
             spec = replace(spec, retract=level)
     if spec.positional and st.dialect.cycle_point == "bottom":
         spec, top = _from_bottom(st, spec, top, axis, line)
-    moves = cycles.cycle_moves(spec, top, axis)
+    try:
+        moves = cycles.cycle_moves(spec, top, axis)
+    except ValueError as error:  # the depth as the hole's bottom point makes it
+        raise st.fail(f"the hole of CYCLE/{spec.kind.upper()}: {error}", line) from None
     if len(st.rows):
         for point in cycles.approach_moves(st.current_pose("CYCLE", line)[0], moves[0][0], axis)[:-1]:
             st.add_pose(point, a, line, rapid=True, motion="cycle")

@@ -388,7 +388,8 @@ def peck_depths(depth: float, pecks: tuple[float, ...]) -> list[float]:
         raise ValueError(f"peck depths must be positive, got {min(pecks):g}")
     head = sum(pecks[:-1])
     if head < depth and (depth - head) / pecks[-1] + len(pecks) > MAX_PECKS:
-        raise ValueError(f"cycle needs more than {MAX_PECKS} pecks")
+        raise ValueError(f"a hole {depth:g} deep in pecks of {pecks[-1]:g} needs more than {MAX_PECKS} pecks: "
+                         "check the depth and the peck depth")
     eps = 1e-9 * max(1.0, depth)  # a last peck shorter than this merges with the one before
     out: list[float] = []
     reached = 0.0

@@ -8,12 +8,13 @@ import click
 
 from .common import check_outputs, post_options, user_errors
 from .main import main
-from .post import finish, run_pipeline, run_post, wants_html
+from .post import finish, refusals_reported, run_pipeline, run_post, wants_html
 
 
 @main.command("check")
 @post_options
 @user_errors
+@refusals_reported
 def check_command(cl_file: str, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Run every check of 'post' (and the time-parametrisation) on PART.cls without writing a program."""
     check_outputs(cl_file, report_path)

@@ -12,7 +12,7 @@ from typing import Any
 
 import click
 
-from ..errors import InputError, one_line
+from ..errors import CheckError, InputError, one_line
 from ..machine import Machine, load_machine
 from .common import check_outputs, decorated, output_options, post_options, setup_file, user_errors
 from .main import main
@@ -63,6 +63,28 @@ def run_post(cl_file: str, output: str | None, verify: bool, report_path: str | 
         return post(cl_file, machine, options, output, verify=verify, timing_figures=bool(report_path),
                     progress=progress, before_writing=lambda posted: finish(machine, options, posted, report_path,
                                                                             quiet, max_messages))
+
+
+def refusals_reported(command: Callable[..., Any]) -> Callable[..., Any]:
+    """A program refused as a whole before its checks (a turning program, one for several heads,
+    a feed the controller cannot take: exit 3) still gets its ``--report`` JSON: not ok, the
+    refusal as its one violation, at its CL line."""
+    from ..output.tables import write_json
+    from ..version import __version__
+
+    @functools.wraps(command)
+    def wrapper(**kwargs: Any) -> Any:
+        try:
+            return command(**kwargs)
+        except CheckError as error:
+            report_path = kwargs.get("report_path")
+            if report_path and not wants_html(report_path):
+                write_json(report_path, {"source": kwargs["cl_file"], "verne_post": __version__, "ok": False,
+                                         "violations": [{"line": error.line, "kind": "refused",
+                                                         "message": one_line(error.reason)}], "warnings": []})
+            raise
+
+    return wrapper
 
 
 #: About how many progress calls a placement makes (the bar stops short of the end until done).
@@ -122,6 +144,7 @@ def finish(machine: Machine, options: Any, result: Any, report_path: str | None,
 @functools.partial(decorated, options=output_options)
 @post_options
 @user_errors
+@refusals_reported
 def post_command(cl_file: str, output: str | None, output_format: str | None, period: float, decimals: int | None,
                  no_verify: bool, report_path: str | None, max_messages: int, **choices: Any) -> None:
     """Postprocess PART.cls (APT/CLSF, or a CSV of poses) into joint-space G-code or a timed CSV.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import re
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,6 +37,16 @@ def print_findings(verification: Verification, max_messages: int) -> None:
         click.echo(f"verne-post: error: {verification.source}:{f.line}: {f.message}{cl}", err=True)
     if len(verification.findings) > max_messages:
         click.echo(f"verne-post: ... and {len(verification.findings) - max_messages} more findings", err=True)
+
+
+#: The header line the post writes, ``MACHINE shop.yaml (VERNE)`` in any comment style.
+_HEADER_MACHINE = re.compile(r"\bMACHINE (\S+) [(\[]")
+
+
+def _header_machine(text: str) -> str | None:
+    """The machine file the program's header names (in its first lines), if any."""
+    match = _HEADER_MACHINE.search("\n".join(text[:20_000].splitlines()[:40]))
+    return match.group(1) if match else None
 
 
 @main.command("verify")
@@ -85,8 +96,15 @@ def verify_command(program: str, cl_file: str | None, machine_path: str | None,
     setup = setup_of(machine, choices, "mm" if against is None else against.units)
     diameters = {} if against is None else {e.tool: e.diameter for e in against.events if isinstance(e, ToolChange)}
     bodies = ProgramBodies(setup, tool_shapes(machine, diameters))
-    verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
-                                  tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol, bodies=bodies)
+    try:
+        verification = verify_program(text, machine, source=program, against=against, work_offset=work_offset,
+                                      tol=tol, axis_tol=axis_tol, rapid_tol=rapid_tol, bodies=bodies)
+    except InputError as error:
+        named = None if machine_path is not None else _header_machine(text)
+        if named is None or named == machine.source:
+            raise
+        raise InputError(f"{error.reason}; the program's header names the machine file {named}: --machine "
+                         f"{named} reads it with that file's controller profile", error.source, error.line) from None
     if report_path:
         write_json(report_path, verification.report())
     if not verification.ok:

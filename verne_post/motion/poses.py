@@ -124,11 +124,21 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
                              int(toolpath.line[0]))
         lengths[:first] = tool_length
         tools.append(_tool_use(machine, 0, tool_length, int(toolpath.line[0]), "--tool-length"))
+    overridden = []  # the tools --tool-length was given for but not used: lengths of their own
     for k, change in enumerate(changes):
         length, origin = _tool_length(machine, change, tool_length, toolpath.source)
         end = changes[k + 1].index if k + 1 < len(changes) else n
         lengths[change.index:end] = length
         tools.append(_tool_use(machine, change.tool, length, change.line, origin, change.diameter))
+        if tool_length is not None and origin != "--tool-length" and abs(length - tool_length) > 1e-6:
+            overridden.append((change, length, origin))
+    warnings = toolpath.warnings
+    if overridden:
+        change, length, origin = overridden[0]
+        more = f" (and {len(overridden) - 1} more tool changes)" if len(overridden) > 1 else ""
+        warnings += (f"{toolpath.source}:{change.line}: --tool-length {tool_length:g} not used: the {origin} gives "
+                     f"tool {change.tool} its length, {length:g} mm (--tool-length serves only tools without one)"
+                     f"{more}",)
     missing_feed = ~toolpath.rapid & ~np.isfinite(toolpath.feed)
     missing_feed[0] = False  # the first motion is a positioning move (G0) anyway
     if missing_feed.any():
@@ -149,6 +159,6 @@ def machine_poses(toolpath: Toolpath, machine: Machine, *, work_offset: tuple[fl
         source=toolpath.source, part_name=toolpath.part_name, tip=toolpath.tip + offset, axis=toolpath.axis,
         line=toolpath.line, rapid=toolpath.rapid, feed=toolpath.feed, inverse_time=toolpath.inverse_time,
         tool=toolpath.tool, tool_length=lengths, sequence=np.cumsum(boundary) - 1, events=toolpath.events,
-        tools=tuple(tools), warnings=toolpath.warnings, dialect=toolpath.dialect, notes=toolpath.notes,
+        tools=tuple(tools), warnings=warnings, dialect=toolpath.dialect, notes=toolpath.notes,
         setup=setup.shifted(offset),
     )

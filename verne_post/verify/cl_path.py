@@ -6,6 +6,7 @@ from __future__ import annotations
 import bisect
 import itertools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,10 +113,13 @@ def _near(queries: np.ndarray, points: np.ndarray, radius: float) -> tuple[np.nd
 @dataclass(frozen=True)
 class _Pieces:
     """The CL segments each block belongs to: poses ``first[m]``..``last[m]`` (segment s runs from
-    pose s - 1 to s; first == last: the block should stay at that pose)."""
+    pose s - 1 to s; first == last: the block should stay at that pose). ``lost``: blocks amid
+    more than :data:`LOST_PIECE` CL segments none of whose poses is reached, compared with the
+    CL path by those reach findings alone (their piece is cut to one pose)."""
 
     first: np.ndarray  # (M,)
     last: np.ndarray  # (M,)
+    lost: np.ndarray  # (M,) bool
 
     def pairs(self, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(owner, from pose, to pose): every segment of the pieces of ``blocks``."""
@@ -125,6 +129,23 @@ class _Pieces:
         s = a[owner] + 1 + _ranks(count)
         point = (b == a)[owner]
         return owner, np.where(point, b[owner], s - 1), np.where(point, b[owner], s)
+
+    def chunks(self, blocks: np.ndarray) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray]]:
+        """:meth:`pairs` of ``blocks[rows]`` for successive ``rows`` of about PAIR_CHUNK pairs in
+        all: where the program strays from the CL path the pieces grow long (a block between two
+        far apart reached poses belongs to every segment between them), and their pairs with them."""
+        for rows in _chunks(np.maximum(self.last[blocks] - self.first[blocks], 1)):
+            yield (rows, *self.pairs(blocks[rows]))
+
+
+def _chunks(count: np.ndarray) -> Iterator[slice]:
+    """Successive slices of ``count`` whose sums are about PAIR_CHUNK (one item may exceed it alone)."""
+    total = np.cumsum(count)
+    edges = np.r_[0, np.searchsorted(total, np.arange(PAIR_CHUNK, total[-1] if total.size else 0, PAIR_CHUNK)),
+                  len(count)]
+    for start, stop in itertools.pairwise(edges.tolist()):
+        if stop > start:
+            yield slice(start, stop)
 
 
 def _ranks(count: np.ndarray) -> np.ndarray:
@@ -148,11 +169,20 @@ def _pieces(matched: np.ndarray, m_blocks: int) -> _Pieces:
     anchor_block = matched[anchor_pose]
     n = len(matched)
     if anchor_pose.size == 0:
-        return _Pieces(np.zeros(m_blocks, np.int64), np.full(m_blocks, n - 1, np.int64))
-    i = np.searchsorted(anchor_block, np.arange(m_blocks), side="left")
-    last = np.where(i < anchor_pose.size, anchor_pose[np.minimum(i, anchor_pose.size - 1)], n - 1)
-    first = np.where(i > 0, anchor_pose[np.maximum(i - 1, 0)], 0)
-    return _Pieces(first, np.maximum(last, first))
+        first, last = np.zeros(m_blocks, np.int64), np.full(m_blocks, n - 1, np.int64)
+    else:
+        i = np.searchsorted(anchor_block, np.arange(m_blocks), side="left")
+        last = np.where(i < anchor_pose.size, anchor_pose[np.minimum(i, anchor_pose.size - 1)], n - 1)
+        first = np.where(i > 0, anchor_pose[np.maximum(i - 1, 0)], 0)
+        last = np.maximum(last, first)
+    # a long stretch the program does not follow: comparing each of its blocks with every segment
+    # of the stretch would cost blocks x segments, and its reach findings already say it
+    lost = last - first > LOST_PIECE
+    return _Pieces(first, np.where(lost, first, last), lost)
+
+
+#: CL segments (their poses all unreached) beyond which the blocks among them are not compared segment by segment.
+LOST_PIECE = 1000
 
 
 def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: np.ndarray, axis: np.ndarray,
@@ -162,14 +192,7 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
     in chunks of at most PAIR_CHUNK point-segment pairs."""
     count = np.maximum(pieces.last[blocks] - pieces.first[blocks], 1)
     tip_error, axis_error, nearest = np.empty(len(blocks)), np.empty(len(blocks)), np.empty(len(blocks), np.int64)
-    total = np.cumsum(count)
-    edges = np.r_[0, np.searchsorted(total, np.arange(PAIR_CHUNK, total[-1] if total.size else 0, PAIR_CHUNK)),
-                  len(blocks)]
-    for start, stop in itertools.pairwise(edges):
-        if stop <= start:
-            continue
-        rows = np.arange(start, stop)
-        owner, a, b = pieces.pairs(blocks[rows])
+    for rows, owner, a, b in pieces.chunks(blocks):
         distance = distance_to_segment(tip[rows][owner], reference.tip[a], reference.tip[b])
         angle = angle_to_arc(axis[rows][owner], reference.axis[a], reference.axis[b])
         # the segment nearest in tip and axis together, each over its tolerance
@@ -183,17 +206,30 @@ def _deviation(reference: Reference, pieces: _Pieces, blocks: np.ndarray, tip: n
 
 def path_findings(program: GcodeProgram, machine: Machine, reference: Reference, motion: Motion, tol: float,
                   axis_tol: float, findings: list[Finding], skip: int, rapid_tol: float, box: np.ndarray
-                  ) -> tuple[float, float, float | None, float | None, int, float | None, float | None]:
+                  ) -> tuple[float | None, float | None, float | None, float | None, int, float | None, float | None]:
     """Reach, order, deviation, rapid and feed findings; returns the largest tip deviation (mm),
     axis deviation (deg), feed ratio, peak feed ratio within a block, the number of CL points
     reached (of those after the first ``skip``: the first ``skip`` blocks and poses were
-    verified with the part before), the largest rapid deviation and dip (mm, :func:`_rapids`)."""
+    verified with the part before), the largest rapid deviation and dip (mm, :func:`_rapids`).
+
+    A program that reaches fewer than :data:`FOLLOWED_SHARE` of the poses follows another path:
+    one ``mismatch`` finding instead (and no deviation, rapid or feed figures). Blocks amid a
+    long unreached stretch (:data:`LOST_PIECE`) are left to its reach findings (and the largest
+    deviations are then None: not measured)."""
     m_blocks = len(program)
     lines, cl_lines = program.line, reference.line
     ends = motion.ends
     matched = _match(reference, ends, motion.known, tol, axis_tol)
     reached = np.flatnonzero(matched >= 0)
-    for k in reached[_out_of_order(matched[reached])]:
+    disorder = reached[_out_of_order(matched[reached])]
+    reached_count = int(np.count_nonzero(matched[skip:] >= 0)) - int(np.count_nonzero(disorder >= skip))
+    poses = len(matched) - skip
+    if reached_count < FOLLOWED_SHARE * poses:
+        # the block-by-block comparison rests on the reached poses: without them every block would
+        # be compared with the whole path, thousands of findings that hide the one cause
+        findings.append(mismatch(int(lines[skip]) if m_blocks > skip else program.last_line, reached_count, poses))
+        return None, None, None, None, reached_count, None, None
+    for k in disorder:
         findings.append(Finding(int(lines[matched[k]]), "order", "reaches this CL point out of the order of the "
                                 "CL path", cl_line=int(cl_lines[k])))
         matched[k] = -1
@@ -202,15 +238,17 @@ def path_findings(program: GcodeProgram, machine: Machine, reference: Reference,
 
     # deviation at the block ends and the interior samples of feed moves that follow the CL path
     curves = motion.curves
-    owner, a, b = pieces.pairs(np.arange(m_blocks))
-    segment = a != b  # a piece of one pose has no motion of its own
     # a CL move across a tool change cannot be cut as programmed: the tool that reaches its end
     # is not the one that left its start (the program moves between cuts there)
     tool_at = np.where(matched >= 0, program.tool[np.maximum(matched, 0)], -2)
-    retooled = (tool_at[a] != tool_at[b]) & (tool_at[a] != -2) & (tool_at[b] != -2)
-    cl_rapid = np.bincount(owner, (reference.rapid[b] | retooled) & segment, minlength=m_blocks) > 0
-    cl_feed = np.bincount(owner, ~reference.rapid[b] & ~retooled & segment, minlength=m_blocks) > 0
-    cl_feed[0] = False  # the first block comes from wherever the machine stands
+    cl_rapid, cl_feed = np.zeros(m_blocks, bool), np.zeros(m_blocks, bool)
+    for rows, owner, a, b in pieces.chunks(np.arange(m_blocks)):  # (lost pieces: one pose, no segment)
+        segment = a != b  # a piece of one pose has no motion of its own
+        retooled = (tool_at[a] != tool_at[b]) & (tool_at[a] != -2) & (tool_at[b] != -2)
+        size = rows.stop - rows.start
+        cl_rapid[rows] = np.bincount(owner, (reference.rapid[b] | retooled) & segment, minlength=size) > 0
+        cl_feed[rows] = np.bincount(owner, ~reference.rapid[b] & ~retooled & segment, minlength=size) > 0
+    cl_feed[:1] = False  # the first block comes from wherever the machine stands
     for m in np.flatnonzero(program.rapid & cl_feed):
         findings.append(Finding(int(lines[m]), "motion", "rapid where the CL path feeds",
                                 cl_line=int(cl_lines[pieces.last[m]])))
@@ -221,7 +259,7 @@ def path_findings(program: GcodeProgram, machine: Machine, reference: Reference,
     point_block = np.r_[end_blocks, curves.block[inner_follows]]
     point_tip = np.concatenate([ends.tip[end_blocks], curves.samples.tip[inner_follows]])
     point_axis = np.concatenate([ends.axis[end_blocks], curves.samples.axis[inner_follows]])
-    ok = np.isfinite(point_tip).all(axis=1)
+    ok = np.isfinite(point_tip).all(axis=1) & ~pieces.lost[point_block]
     point_block, point_tip, point_axis = point_block[ok], point_tip[ok], point_axis[ok]
     tip_error, axis_error, nearest = _deviation(reference, pieces, point_block, point_tip, point_axis, tol,
                                                 axis_tol)
@@ -241,8 +279,20 @@ def path_findings(program: GcodeProgram, machine: Machine, reference: Reference,
                                 limit=float(np.degrees(axis_tol))))
     feed_ratio, peak_ratio = _feed(program, reference, machine, matched, pieces, curves, follows, findings)
     rapid_dev, rapid_dip = _rapids(program, reference, motion, pieces, skip, rapid_tol, box, findings)
+    if pieces.lost.any():  # blocks not measured: no largest deviation to tell
+        return None, None, feed_ratio, peak_ratio, reached_count, rapid_dev, rapid_dip
     return (float(tip_total.max(initial=0.0)), float(np.degrees(axis_total.max(initial=0.0))), feed_ratio,
-            peak_ratio, int(np.count_nonzero(matched[skip:] >= 0)), rapid_dev, rapid_dip)
+            peak_ratio, reached_count, rapid_dev, rapid_dip)
+
+
+#: A program that reaches fewer of its CL poses than this share follows another path: one finding says so.
+FOLLOWED_SHARE = 0.5
+
+
+def mismatch(line: int, reached: int, poses: int) -> Finding:
+    """The finding of a program that does not follow its CL path (``reached`` of ``poses``)."""
+    return Finding(line, "mismatch", f"{reached} of {poses} CL points reached: the program does not follow this "
+                   "CL path; another CL file, machine file or work offset?", value=float(reached), limit=float(poses))
 
 
 def _below_line(point: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -280,9 +330,9 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces:
     largest distance from where a rapid may be and the largest dip below its CL line (mm) of the
     points judged by their line, None without rapids."""
     ends, curves = motion.ends, motion.curves
-    blocks = np.flatnonzero(program.rapid & motion.known & ends.reachable)
+    blocks = np.flatnonzero(program.rapid & motion.known & ends.reachable & ~pieces.lost)
     blocks = blocks[blocks >= skip]
-    inner = np.repeat(program.rapid[curves.moves], curves.n - 1)
+    inner = np.repeat(program.rapid[curves.moves] & ~pieces.lost[curves.moves], curves.n - 1)
     block = np.r_[blocks, curves.block[inner]]
     if block.size == 0:
         return None, None
@@ -290,18 +340,19 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces:
     bound = np.r_[np.zeros(len(blocks)), np.repeat(motion.bound_tip, curves.n - 1)[inner]]
     known = np.isfinite(point).all(axis=1)  # an unreachable sample is a finding of its own
     block, point, bound = block[known], point[known], bound[known]
-    owner, a, b = pieces.pairs(block)
-    at, ref = point[owner], reference.tip
-    line = distance_to_segment(at, ref[a], ref[b]) + bound[owner]
-    dip = _below_line(at, ref[a], ref[b]) + bound[owner]
-    ray = np.minimum(_from_ray(at, ref[a], reference.axis[a]), _from_ray(at, ref[b], reference.axis[b])) + bound[owner]
     count = len(block)
-    on_line = np.full(count, np.inf)
-    np.minimum.at(on_line, owner, np.where(dip <= RAPID_DIP_TOL, line, np.inf))
-    on_ray, nearest_line, least_dip = np.full(count, np.inf), np.full(count, np.inf), np.full(count, np.inf)
-    np.minimum.at(on_ray, owner, ray)
-    np.minimum.at(nearest_line, owner, line)
-    np.minimum.at(least_dip, owner, dip)
+    on_line, on_ray = np.full(count, np.inf), np.full(count, np.inf)
+    nearest_line, least_dip = np.full(count, np.inf), np.full(count, np.inf)
+    ref = reference.tip
+    for rows, owner, a, b in pieces.chunks(block):
+        at, widen, index = point[rows][owner], bound[rows][owner], np.arange(rows.start, rows.stop)[owner]
+        line = distance_to_segment(at, ref[a], ref[b]) + widen
+        dip = _below_line(at, ref[a], ref[b]) + widen
+        ray = np.minimum(_from_ray(at, ref[a], reference.axis[a]), _from_ray(at, ref[b], reference.axis[b])) + widen
+        np.minimum.at(on_line, index, np.where(dip <= RAPID_DIP_TOL, line, np.inf))
+        np.minimum.at(on_ray, index, ray)
+        np.minimum.at(nearest_line, index, line)
+        np.minimum.at(least_dip, index, dip)
     # the sample widened by its bound on every side: a box of half-width ``bound`` about it
     lo, hi = box
     low, high = point - bound[:, None], point + bound[:, None]
@@ -358,18 +409,20 @@ def _unreached(reference: Reference, matched: np.ndarray, ends: Poses, lines: np
     after = matched[anchors[np.minimum(i, anchors.size - 1)]] if anchors.size else np.full(missing.size, -1)
     after = np.where(i < anchors.size, after, len(lines) - 1)
     count = np.clip(after - before, 1, 1000)
-    owner = np.repeat(np.arange(missing.size), count)
-    block = np.clip(before[owner] + 1 + _ranks(count), 0, len(lines) - 1)
-    target = reference.tip[missing[owner]]
-    distance = distance_to_segment(target, ends.tip[np.maximum(block - 1, 0)], ends.tip[block])
-    distance = np.nan_to_num(distance, nan=np.inf)
-    order = np.lexsort((block, distance, owner))
-    best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
+    gap, where = np.empty(missing.size), np.empty(missing.size, np.int64)
+    for rows in _chunks(count):  # up to 1000 blocks for each missing pose: bounded in chunks
+        owner = np.repeat(np.arange(rows.stop - rows.start), count[rows])
+        block = np.clip(before[rows][owner] + 1 + _ranks(count[rows]), 0, len(lines) - 1)
+        target = reference.tip[missing[rows][owner]]
+        distance = distance_to_segment(target, ends.tip[np.maximum(block - 1, 0)], ends.tip[block])
+        distance = np.nan_to_num(distance, nan=np.inf)
+        order = np.lexsort((block, distance, owner))
+        best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
+        gap[rows], where[rows] = distance[best], block[best]
     for j, k in enumerate(missing):
-        gap = float(distance[best[j]])
-        near = f" (the move passes {gap:.4f} mm from it)" if math.isfinite(gap) else ""
-        findings.append(Finding(int(lines[block[best[j]]]), "reach", "no block end reaches this CL point" + near,
-                                cl_line=int(reference.line[k]), value=gap, limit=tol))
+        near = f" (the move passes {gap[j]:.4f} mm from it)" if math.isfinite(gap[j]) else ""
+        findings.append(Finding(int(lines[where[j]]), "reach", "no block end reaches this CL point" + near,
+                                cl_line=int(reference.line[k]), value=float(gap[j]), limit=tol))
 
 
 def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched: np.ndarray, pieces: _Pieces,
@@ -388,7 +441,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
     a finding).
     """
     moves = curves.moves
-    timed = follows & (program.duration[moves] > 0)
+    timed = follows & (program.duration[moves] > 0) & ~pieces.lost[moves]
     step = np.linalg.norm(np.diff(curves.tip, axis=0), axis=1)  # consecutive points; across moves dropped
     within = np.ones(len(step), bool)
     within[(curves.start + curves.n)[:-1]] = False
@@ -396,14 +449,18 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
     minutes = program.duration[moves] / 60.0
     speed = np.add.reduceat(step, curves.start) / minutes if len(step) else np.zeros(0)  # mm/min
     peak = np.maximum.reduceat(step, curves.start) * curves.n / minutes if len(step) else np.zeros(0)
-    owner, a, b = pieces.pairs(moves)
-    travel = np.linalg.norm(reference.tip[b] - reference.tip[a], axis=1) >= STILL_TIP
-    per_minute = np.where(travel & ~reference.inverse_time[b], reference.feed[b], np.nan)
-    lowest = np.full(len(moves), np.inf)
-    np.fmin.at(lowest, owner, per_minute)
-    lowest[np.bincount(owner, travel & reference.inverse_time[b], minlength=len(moves)) > 0] = np.inf
-    still = (np.bincount(owner, travel, minlength=len(moves)) == 0) & (np.bincount(owner, a != b,
-                                                                                   minlength=len(moves)) > 0)
+    lowest, inverse = np.full(len(moves), np.inf), np.zeros(len(moves), bool)
+    travels, turns = np.zeros(len(moves), bool), np.zeros(len(moves), bool)
+    for rows, owner, a, b in pieces.chunks(moves):
+        size = rows.stop - rows.start
+        travel = np.linalg.norm(reference.tip[b] - reference.tip[a], axis=1) >= STILL_TIP
+        per_minute = np.where(travel & ~reference.inverse_time[b], reference.feed[b], np.nan)
+        np.fmin.at(lowest, np.arange(rows.start, rows.stop)[owner], per_minute)
+        inverse[rows] = np.bincount(owner, travel & reference.inverse_time[b], minlength=size) > 0
+        travels[rows] = np.bincount(owner, travel, minlength=size) > 0
+        turns[rows] = np.bincount(owner, a != b, minlength=size) > 0
+    lowest[inverse] = np.inf
+    still = ~travels & turns
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(timed & np.isfinite(lowest), speed / lowest, np.nan)
         # the rounding of the written block ends, as a share of the length the feed allows

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..api import placeable
 from ..bodies.world import ProgramBodies, cutting, least_contacts
 from ..machine import Machine
 from .gcode_reader import GcodeProgram
@@ -24,6 +25,7 @@ def collision_findings(program: GcodeProgram, machine: Machine, bodies: ProgramB
         return []
     world, stack = bodies.world(machine.bodies, machine.geom, program.tool, lengths, work_offset)
     radius = max(float(s.radius[0]) for s in world.stacks)
-    result = world.clearance(program.joints, stack, cutting(world.setup, tip, program.rapid, radius))
+    cut = cutting(world.setup, tip, program.rapid, radius)
+    result = world.clearance(placeable(machine, program.joints), stack, cut)
     return [Finding(line, "collision", f"the {a} meets the {b} (clearance 0.000 mm)", value=0.0)
             for line, a, b, clearance in least_contacts(result.contacts, program.line) if clearance <= 0.0]

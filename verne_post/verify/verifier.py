@@ -44,7 +44,7 @@ from ..bodies.world import ProgramBodies
 from ..cl.toolpath import Toolpath
 from ..errors import InputError
 from ..machine import Machine
-from .cl_path import path_findings, rapid_block_dips
+from .cl_path import mismatch, path_findings, rapid_block_dips
 from .collisions import collision_findings
 from .gcode_reader import GcodeProgram, ReadState, read_gcode
 from .limits import joint_speed, limit_findings, tool_lengths
@@ -219,7 +219,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     margins = samples.margins
     return Verification(
         source=program.source, against=None if reference is None else reference.source,
-        findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))), blocks=len(program) - skip,
+        findings=_in_order(unique.values()), blocks=len(program) - skip,
         samples=len(block) - skip, tol=tol, axis_tol=axis_tol,
         work_offset=(float(x), float(y), float(z)),
         tip_deviation=tip_dev, axis_deviation=axis_dev,
@@ -287,6 +287,13 @@ class Verifier:
         for finding in (f for part in parts for f in part.findings):
             unique.setdefault((finding.line, finding.kind), finding)
         against = next((part.against for part in parts if part.against is not None), None)
+        strays = [key for key, finding in unique.items() if finding.kind == "mismatch"]
+        if strays:  # one finding for the program, with the counts of every part
+            line = unique[strays[0]].line
+            for key in strays:
+                del unique[key]
+            unique[(line, "mismatch")] = mismatch(line, sum(part.cl_points_reached or 0 for part in parts),
+                                                  sum(part.cl_points or 0 for part in parts))
 
         def most(name: str, pick: Any = max) -> float | None:
             values = [getattr(part, name) for part in parts if getattr(part, name) is not None]
@@ -306,7 +313,7 @@ class Verifier:
 
         return Verification(
             source=self.source, against=against,
-            findings=tuple(sorted(unique.values(), key=lambda f: (f.line, f.kind))),
+            findings=_in_order(unique.values()),
             blocks=sum(part.blocks for part in parts), samples=sum(part.samples for part in parts), tol=self.tol,
             axis_tol=self.axis_tol, work_offset=self.work_offset,
             tip_deviation=most("tip_deviation"), axis_deviation=most("axis_deviation"),
@@ -329,6 +336,11 @@ def _joined_program(first: GcodeProgram, then: GcodeProgram) -> GcodeProgram:
     """``then`` with the blocks of ``first`` before its own."""
     return replace(then, **{name: np.concatenate([getattr(first, name), getattr(then, name)])
                             for name in _BLOCK_FIELDS})
+
+
+def _in_order(findings: Iterable[Finding]) -> tuple[Finding, ...]:
+    """By line, a program that does not follow its CL path first: that explains the rest."""
+    return tuple(sorted(findings, key=lambda f: (f.kind != "mismatch", f.line, f.kind)))
 
 
 def _nanmin(values: np.ndarray) -> float | None:
