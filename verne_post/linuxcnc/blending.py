@@ -42,7 +42,7 @@ from ..planning.controller import rotary_block_floor
 from ..planning.timing import Limits
 
 #: Where the blend is measured (s in the module docstring).
-SAMPLES = np.array([0.1, 0.25, 0.4, 0.5, 0.6, 0.75, 0.9])
+SAMPLES = np.linspace(0.025, 0.975, 20)
 #: The blend may use this share of the tolerance before a corner is guarded (the measure's few
 #: samples may understate it).
 MARGIN = 0.8
@@ -133,13 +133,18 @@ def guard_corners(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     turns = np.any(step[:-1, 3:] != 0, axis=1) | np.any(step[1:, 3:] != 0, axis=1)
     same_tool = (tool_length[:-2] == tool_length[1:-1]) & (tool_length[1:-1] == tool_length[2:])
     f1, f2 = blend_fractions(joints, blend_tolerance)
-    corner = 1 + np.flatnonzero(turns & same_tool)
+    finite = np.all(np.isfinite(joints), axis=1)  # a program that does not run (unreachable poses) has no blends
+    corner = 1 + np.flatnonzero(turns & same_tool & finite[:-2] & finite[1:-1] & finite[2:])
+    if not corner.size:
+        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
     budget = MARGIN * np.where(rapid[corner] | rapid[corner + 1], rapid_tol, tol)
     deviation = blend_deviation(machine, joints[corner], step[corner - 1], step[corner], f1[corner - 1],
                                 f2[corner - 1], (blocks.tip[corner - 1], blocks.tip[corner], blocks.tip[corner + 1]),
                                 tool_length[corner])
     over = deviation > budget
     corner, budget, deviation = corner[over], budget[over], deviation[over]
+    if not corner.size:
+        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
     f1, f2 = f1[corner - 1], f2[corner - 1]
     units = np.r_[np.full(3, 1e-4), np.full(2, np.radians(1e-5))]
     least = MIN_GUARD_UNITS / np.max(np.abs(step) / units, axis=1)  # (M - 1,) share per block
