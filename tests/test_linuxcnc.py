@@ -23,7 +23,6 @@ from verne_post.api import forward_kinematics
 from verne_post.cli import main
 from verne_post.errors import InputError
 from verne_post.linuxcnc import export_config, simulate
-from verne_post.linuxcnc.blending import Guarded
 from verne_post.linuxcnc.measures import path_deviation
 from verne_post.linuxcnc.simulate import SimulationResult, linuxcnc_available
 from verne_post.motion.linearise import Blocks
@@ -284,8 +283,9 @@ GOTO/8.5139,-45.0488,130.0,-0.064302,-0.633091,0.771402
 """
 
 
-def _no_guards(machine: vp.Machine, blocks: Blocks, rapid: np.ndarray, *args: object, **kwargs: object) -> Guarded:
-    return Guarded(blocks, rapid, np.arange(len(rapid)), np.ones(len(rapid)))
+def _no_guards(machine: vp.Machine, blocks: Blocks, rapid: np.ndarray, *args: object, **kwargs: object
+               ) -> tuple[np.ndarray, np.ndarray]:
+    return np.zeros(len(rapid)), np.zeros(len(rapid))
 
 
 def _post_dome(folder: Path) -> Path:
@@ -316,7 +316,7 @@ def test_guards_lie_on_the_programs_joint_lines(tmp_path: Path, monkeypatch: pyt
     guarded = _blocks(_post_dome(tmp_path))
     plain_dir = tmp_path / "plain"
     plain_dir.mkdir()
-    monkeypatch.setattr(pipeline, "guard_corners", _no_guards)
+    monkeypatch.setattr(pipeline, "corner_guards", _no_guards)
     plain = _blocks(_post_dome(plain_dir))
     assert len(guarded) > len(plain)
     scale = np.array([1, 1, 1, 10, 10])  # deg to ~mm at the table's reach, for the rounding only
@@ -346,7 +346,7 @@ def test_linuxcnc_keeps_the_tip_on_the_path_at_rotary_corners(tmp_path: Path, mo
     with_guards = path_deviation(machine, guarded.read_text(), simulate(guarded, machine, time_scale=TIME_SCALE))
     plain_dir = tmp_path / "plain"
     plain_dir.mkdir()
-    monkeypatch.setattr(pipeline, "guard_corners", _no_guards)
+    monkeypatch.setattr(pipeline, "corner_guards", _no_guards)
     plain = _post_dome(plain_dir)
     without = path_deviation(machine, plain.read_text(), simulate(plain, machine, time_scale=TIME_SCALE))
     assert without.feeds > 3 * tol, without.feeds

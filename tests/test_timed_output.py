@@ -81,27 +81,46 @@ def test_block_ends_and_inverse_time_feeds_follow_the_plan(tmp_path: Path, name:
     machine = vp.load_machine()
     result = postprocess(EXAMPLES / name, machine, PostOptions(work_offset=offset))
     program, schedule = result.program, result.schedule
-    # The timed CSV with period 0: one row per block end, at the pipeline's joints.
+    # The timed CSV with period 0: one row per block end of the plan, at the pipeline's joints.
     path = _run(tmp_path, name, offset, ".csv", "--period", "0")
     rows = np.loadtxt(path, delimiter=",", skiprows=1, usecols=range(6))
-    expected = np.column_stack([program.joints[1:, :3], np.degrees(program.joints[1:, 3:])])
+    plan = result.blocks.joints
+    expected = np.column_stack([plan[1:, :3], np.degrees(plan[1:, 3:])])
     np.testing.assert_allclose(rows[:, 1:], expected, atol=2e-6)
     np.testing.assert_allclose(rows[:, 0], np.cumsum(schedule.duration)[1:], atol=2e-6)
     # The G-code's inverse-time F words reproduce the planned durations, each kept at least at
     # what LinuxCNC 2.9's planner needs for a block that turns A or C (the default dialect's):
     # sqrt(2 max_i |dq_i| / AMAX_i) (tp.c: no blending, no lookahead for rotary lines; tc.c: half
-    # the acceleration in a parabolic blend; docs/linuxcnc.md).
+    # the acceleration in a parabolic blend; docs/linuxcnc.md). The program may split a planned
+    # block into pieces on its line (guard blocks at rotary corners): each piece keeps that floor
+    # too, and a planned block's pieces together take at least its kept time.
     gcode = _run(tmp_path, name, offset, ".nc").read_text()
-    f_words = np.array([float(f) for f in re.findall(r"^G1 .* F(\S+)$", gcode, re.M)])
-    step = np.abs(np.diff(program.joints, axis=0))
+    f_words = np.array([float(f) for f in re.findall(r"^G1 .* F([0-9.]+)", gcode, re.M)])  # feeds, RAPID too
     amax = np.array([getattr(machine.joints, j).acceleration for j in ("rho1", "rho2", "rho3", "theta1", "theta2")])
     amax[3:] = np.radians(amax[3:])
-    floor = np.where(np.any(step[:, 3:] > 0, axis=1), np.sqrt(2.0 * np.max(step / amax, axis=1)), 0.0)
-    feed = ~program.between[1:] if program.between is not None else np.ones(len(step), bool)
-    kept = np.maximum(schedule.duration[1:], floor)
-    assert np.sum(60.0 / f_words) == pytest.approx(np.sum(kept[feed]), rel=1e-3)
-    assert np.sum(60.0 / f_words) >= sum(s.plan.total for s in schedule.segments if not s.rapid) * (1 - 1e-3)
-    assert f"CYCLE TIME {np.sum(np.maximum(schedule.duration, np.r_[0.0, floor])):.1f} S" in gcode
+
+    def floor(joints: np.ndarray) -> np.ndarray:
+        step = np.abs(np.diff(joints, axis=0))
+        return np.where(np.any(step[:, 3:] > 0, axis=1), np.sqrt(2.0 * np.max(step / amax, axis=1)), 0.0)
+
+    written = program.joints
+    assert len(f_words) == len(written) - 1 - np.sum(program.rapid[1:])
+    seconds = np.zeros(len(written))
+    seconds[1:][~program.rapid[1:]] = 60.0 / f_words
+    ends, k = [], 0  # every planned block end is written, in order (guards only between them)
+    for row in plan:
+        while not np.array_equal(written[k], row):
+            k += 1
+        ends.append(k)
+        k += 1
+    ends = np.array(ends)
+    kept = np.maximum(schedule.duration[1:], floor(plan))
+    pieces = np.add.reduceat(seconds, ends[:-1] + 1) if len(ends) > 1 else np.zeros(0)
+    assert np.all(pieces >= kept * (1 - 1e-3) - 1e-6)
+    assert np.all(seconds[1:] >= floor(written) * (1 - 1e-3) - 1e-6)
+    assert np.sum(seconds) >= sum(s.plan.total for s in schedule.segments if not s.rapid) * (1 - 1e-3)
+    header = float(re.search(r"CYCLE TIME (\d+\.\d) S", gcode).group(1))
+    assert header == pytest.approx(np.sum(seconds), abs=0.05 + 1e-4 * header)
 
 
 def _rounding(decimals: int, h: float) -> float:

@@ -51,7 +51,7 @@ from .checks.stage import (
 from .cl import read_toolpath
 from .cl.toolpath import Event, ToolChange
 from .errors import OutputError
-from .linuxcnc.blending import blend_tolerance, guard_corners, split_durations
+from .linuxcnc.blending import blend_tolerance, corner_guards, split_durations, with_guards
 from .machine import Machine
 from .motion.branch import BranchState, PairAngles, Pairs, PathIK, both_pairs, choose_pairs, in_pole_cone
 from .motion.linearise import Blocks
@@ -89,7 +89,9 @@ from .version import __version__
 
 @dataclass
 class PostResult:
-    """What the pipeline produced for the whole program; ``program`` is None when there are violations."""
+    """What the pipeline produced for the whole program; ``program`` is None when there are violations.
+    ``blocks``, ``rapid`` and ``duration`` are the plan's (the schedule's, the timed CSV's); the
+    program may hold guard blocks besides (:mod:`verne_post.linuxcnc.blending`)."""
 
     poses: MachinePoses
     path: PathIK
@@ -152,20 +154,32 @@ class Part:
     def own(self) -> slice:
         return slice(self.context, None)
 
-    def guarded(self, machine: Machine, poses: MachinePoses, options: PostOptions, timed: Timing
-                ) -> tuple[Part, Timing]:
+    def guarded(self, machine: Machine, poses: MachinePoses, options: PostOptions, timed: Timing,
+                following: Part | None = None, carried: float = 0.0) -> tuple[Part, Timing, float]:
         """This part and its timing with the guard blocks the controller's blending needs
-        (:mod:`verne_post.linuxcnc.blending`; unchanged on other controllers), laid after the timing."""
+        (:mod:`verne_post.linuxcnc.blending`; none on other controllers), laid after the timing, and
+        the share of the next part's first block to guard at its start. ``following``: the next part
+        (its first block decides the guards at this part's last block end); ``carried``: the share
+        of this part's first block the part before decided."""
         profile = machine.controller.profile()
         blending = blend_tolerance(profile.program_start, options.tol) if profile.dialect == "linuxcnc" else None
         if blending is None:
-            return self, timed
-        guarded = guard_corners(machine, self.blocks, self.rapid, poses.tool_length[self.blocks.pose], tol=options.tol,
-                                rapid_tol=options.rapid_tol, blend_tolerance=blending)
-        if len(guarded.owner) == len(self.rapid):
-            return self, timed
+            return self, timed, 0.0
+        blocks, rapid, m = self.blocks, self.rapid, len(self.rapid)
+        if following is not None and len(following.rapid) > following.context:
+            ahead = slice(following.context, following.context + 1)
+            blocks, rapid = blocks.then(following.blocks.rows(ahead)), np.r_[rapid, following.rapid[ahead]]
+        before, after = corner_guards(machine, blocks, rapid, poses.tool_length[blocks.pose], tol=options.tol,
+                                      rapid_tol=options.rapid_tol, blend_tolerance=blending)
+        after = after[:m + 1] if len(after) > m else np.r_[after, 0.0]
+        if self.context and m > 1:
+            after[1] = carried
+        guarded = with_guards(self.blocks, self.rapid, before[:m], after[:m])
+        if len(guarded.owner) == m:
+            return self, timed, float(after[m])
         duration = split_durations(guarded, timed.duration, Limits.from_machine(machine), profile.block_time)
-        return replace(self, blocks=guarded.blocks, rapid=guarded.rapid), replace(timed, duration=duration)
+        return (replace(self, blocks=guarded.blocks, rapid=guarded.rapid), replace(timed, duration=duration),
+                float(after[m]))
 
     def timed(self, wanted: bool = True) -> Timing:
         """The part's timing (waits for the helper); not ``wanted``: as if it had not been planned."""
@@ -375,17 +389,19 @@ def postprocess(path: str | Path, machine: Machine, options: PostOptions,
     poses, options, placement = _machine_poses(path, machine, options, clock)
     feasible = placement is None or placement.feasible
     part = next(_parts(machine, poses, options, len(poses), clock.lap, plan=options.plan and feasible))
-    part, timing = part.guarded(machine, poses, options, part.timed())
+    timing = part.timed()
+    # the result keeps the plan's blocks (its schedule's, the timed CSV's); the program, the controller's
+    written, written_timing, _ = part.guarded(machine, poses, options, timing)
     violations = _violations(part.checks, part.others, list(timing.violations), placement)
     warnings = [*machine.warnings, *poses.warnings, *part.warnings]
     if part.path.in_cone.any() and machine.pole.cone > options.axis_tol:
         warnings.append(_cone_warning(machine, options, poses.source))
     program = None
     if not violations:
-        figures = Figures(blocks=len(part.blocks.joints), inserted=int(np.sum(part.blocks.fraction != 1)),
-                          time=float(np.sum(timing.duration)))
-        program = _frame(machine, poses, options, placement, figures, part.blocks, part.rapid, timing.duration,
-                         _at_blocks(_events(poses), part.blocks))
+        figures = Figures(blocks=len(written.blocks.joints), inserted=int(np.sum(written.blocks.fraction != 1)),
+                          time=float(np.sum(written_timing.duration)))
+        program = _frame(machine, poses, options, placement, figures, written.blocks, written.rapid,
+                         written_timing.duration, _at_blocks(_events(poses), written.blocks))
     return PostResult(poses, part.path, part.blocks, part.rapid, timing.duration, violations, warnings, program,
                       timing.schedule, clock.seconds, placement)
 
@@ -468,14 +484,15 @@ def _plan_for_posting(task: TimingTask) -> Timing:
     return replace(plan_timing(task), schedule=None)
 
 
-def _one_ahead(parts: Iterator[Part]) -> Iterator[Part]:
-    """The parts, each handed on once the next has been made (its planning under way)."""
+def _with_next(parts: Iterator[Part]) -> Iterator[tuple[Part, Part | None]]:
+    """Each part with the next (None after the last), handed on once the next has been made (its
+    planning under way in a helper; its first block decides the guards at the part's end)."""
     current = next(parts, None)
     for following in parts:
-        yield current  # type: ignore[misc]
+        yield current, following  # type: ignore[misc]
         current = following
     if current is not None:
-        yield current
+        yield current, None
 
 
 def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement: Placement | None,
@@ -496,7 +513,6 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
     warnings = [*machine.warnings, *poses.warnings]
     in_cone = False
     failed = placement is not None and not placement.feasible
-    helped = planner is not plan_timing
     # No work offset runs the program: the placement's one-line reason is the answer, as 'place'
     # gives it; checking every part at an offset known to fail took minutes and printed
     # thousands of violations that say the same.
@@ -504,9 +520,11 @@ def _post(machine: Machine, poses: MachinePoses, options: PostOptions, placement
                                           timing_figures)
     k = -1
     with _spool(output) as spool:
-        for k, part in enumerate(_one_ahead(parts) if helped else parts):
-            part, timed = part.guarded(machine, poses, options, part.timed(wanted=not failed))  # a part after a
-            #                                                         failed one: as if not planned
+        carried = 0.0
+        for k, (part, following) in enumerate(_with_next(parts)):
+            # a part after a failed one: as if not planned
+            part, timed, carried = part.guarded(machine, poses, options, part.timed(wanted=not failed), following,
+                                                carried)
             if isinstance(part.planning, Future):  # planned in the helper
                 clock.seconds["timing"] = clock.seconds.get("timing", 0.0) + timed.seconds
                 clock.lap("waiting")

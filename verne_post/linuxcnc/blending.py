@@ -124,10 +124,21 @@ def guard_corners(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     blend could take the tip further than ``tol`` (mm; ``rapid_tol`` around moves between cuts) from
     the CL path (module docstring). ``tool_length`` (M,) mm per block; ``blend_tolerance`` mm: the
     program's ``G64 P`` (0: none)."""
+    before, after = corner_guards(machine, blocks, rapid, tool_length, tol=tol, rapid_tol=rapid_tol,
+                                  blend_tolerance=blend_tolerance)
+    return with_guards(blocks, rapid, before, after)
+
+
+def corner_guards(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_length: np.ndarray, *,
+                  tol: float, rapid_tol: float, blend_tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The guards :func:`guard_corners` lays: (M,) shares of each block (the motion into row j)
+    guarded at its end, and (M,) at its start. Each corner is decided from its own two blocks alone,
+    so a program in parts gets the guards of the whole (the pipeline hands a part the next block)."""
     joints = blocks.joints
     m = len(joints)
+    none = (np.zeros(m), np.zeros(m))
     if m < 3:
-        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
+        return none
     step = np.diff(joints, axis=0)
     # the block ends a rotary takes part in, within one tool (a tool change stops the machine)
     turns = np.any(step[:-1, 3:] != 0, axis=1) | np.any(step[1:, 3:] != 0, axis=1)
@@ -136,7 +147,7 @@ def guard_corners(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     finite = np.all(np.isfinite(joints), axis=1)  # a program that does not run (unreachable poses) has no blends
     corner = 1 + np.flatnonzero(turns & same_tool & finite[:-2] & finite[1:-1] & finite[2:])
     if not corner.size:
-        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
+        return none
     budget = MARGIN * np.where(rapid[corner] | rapid[corner + 1], rapid_tol, tol)
     deviation = blend_deviation(machine, joints[corner], step[corner - 1], step[corner], f1[corner - 1],
                                 f2[corner - 1], (blocks.tip[corner - 1], blocks.tip[corner], blocks.tip[corner + 1]),
@@ -144,7 +155,7 @@ def guard_corners(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     over = deviation > budget
     corner, budget, deviation = corner[over], budget[over], deviation[over]
     if not corner.size:
-        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
+        return none
     f1, f2 = f1[corner - 1], f2[corner - 1]
     units = np.r_[np.full(3, 1e-4), np.full(2, np.radians(1e-5))]
     least = MIN_GUARD_UNITS / np.max(np.abs(step) / units, axis=1)  # (M - 1,) share per block
@@ -170,23 +181,27 @@ def guard_corners(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     guard_before = np.zeros(m)  # share of block j (the motion into row j) guarded at its end
     guard_after = np.zeros(m)  # ... at its start
     guard_before[corner], guard_after[corner + 1] = g1, g2
-    return _with_guards(blocks, rapid, guard_before, guard_after)
+    return guard_before, guard_after
 
 
-def _with_guards(blocks: Blocks, rapid: np.ndarray, guard_before: np.ndarray, guard_after: np.ndarray) -> Guarded:
+def with_guards(blocks: Blocks, rapid: np.ndarray, guard_before: np.ndarray, guard_after: np.ndarray) -> Guarded:
     """The blocks with a block end inserted at share ``guard_after[j]`` and ``1 - guard_before[j]``
-    along block j (where > 0), on its joint-space line."""
+    along block j (where > 0; never block 0, whose start is not here), on its joint-space line."""
     m = len(blocks.joints)
+    if not np.any(guard_before) and not np.any(guard_after):
+        return Guarded(blocks, rapid, np.arange(m), np.ones(m))
     owner = np.r_[np.arange(m), np.flatnonzero(guard_after), np.flatnonzero(guard_before)]
     share = np.r_[np.ones(m), guard_after[guard_after > 0], 1.0 - guard_before[guard_before > 0]]
     order = np.lexsort((share, owner))
     owner, share = owner[order], share[order]
     piece = share - np.where(np.r_[False, owner[1:] == owner[:-1]], np.r_[0.0, share[:-1]], 0.0)
     start = np.maximum(owner - 1, 0)
-    u = share[:, None]
-    joints = blocks.joints[start] + u * (blocks.joints[owner] - blocks.joints[start])
-    tip = blocks.tip[start] + u * (blocks.tip[owner] - blocks.tip[start])
-    axis = blocks.axis[start] + u * (blocks.axis[owner] - blocks.axis[start])
+    u, end = share[:, None], (share == 1.0)[:, None]  # a block's own end kept exactly (a + (b - a) is not b)
+
+    def along(values: np.ndarray) -> np.ndarray:
+        return np.where(end, values[owner], values[start] + u * (values[owner] - values[start]))
+
+    joints, tip, axis = along(blocks.joints), along(blocks.tip), along(blocks.axis)
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)
     same_pose = blocks.pose[start] == blocks.pose[owner]
     before = np.where(same_pose, blocks.fraction[start], 0.0)
