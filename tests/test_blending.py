@@ -50,7 +50,7 @@ def test_guards_lie_on_the_joint_lines_and_share_their_blocks(machine: vp.Machin
     # durations: each row its share of its block, at least its own least time; never shorter in all
     duration = np.r_[0.0, np.full(n - 1, 0.02)]
     limits = Limits.from_machine(machine)
-    split = split_durations(guarded, duration, limits, block_time=0.001)
+    split = split_durations(machine, guarded, duration, np.full(len(guarded.owner), TOOL), block_time=0.001)
     guards = guarded.piece < 1.0
     assert np.all(split[guards] >= rotary_block_floor(guarded.blocks.joints, limits)[guards] - 1e-15)
     assert np.all(split[guards] >= 0.001) and split.sum() >= duration.sum()

@@ -89,7 +89,7 @@ def _code(line: str) -> str:
 CUSTOM = """  dialect: linuxcnc
   axes: {rho1: U, rho2: V, rho3: W, theta1: B, theta2: C}
   comment: semicolon
-  program_start: ["G21 G90 G17 G40 G49 G94", "M11 ; table unclamped"]
+  program_start: ["G21 G90 G17 G40 G49 G94", "M11 ; table unclamped", "G64 P{tolerance:.4f} Q0"]
   program_end: ["M5 M9", "M12", "G94", "M30"]
   tool_change: ["T{tool} M6", "; DELTA {delta} MM FOR TOOL {tool}"]
   block_numbers: {start: 100, step: 5}

@@ -177,7 +177,8 @@ class Part:
         guarded = with_guards(self.blocks, self.rapid, before[:m], after[:m])
         if len(guarded.owner) == m:
             return self, timed, float(after[m])
-        duration = split_durations(guarded, timed.duration, Limits.from_machine(machine), profile.block_time)
+        duration = split_durations(machine, guarded, timed.duration, poses.tool_length[guarded.blocks.pose],
+                                   profile.block_time)
         return (replace(self, blocks=guarded.blocks, rapid=guarded.rapid), replace(timed, duration=duration),
                 float(after[m]))
 

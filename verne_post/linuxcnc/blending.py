@@ -213,10 +213,23 @@ def with_guards(blocks: Blocks, rapid: np.ndarray, guard_before: np.ndarray, gua
     return Guarded(guarded, rapid[owner], owner, piece)
 
 
-def split_durations(guarded: Guarded, duration: np.ndarray, limits: Limits, block_time: float = 0.0) -> np.ndarray:
+def split_durations(machine: Machine, guarded: Guarded, duration: np.ndarray, tool_length: np.ndarray,
+                    block_time: float = 0.0) -> np.ndarray:
     """(M',) s: each row's share of its block's ``duration`` (s, per given block), at least the
     least time LinuxCNC takes for it (:func:`~verne_post.planning.controller.rotary_block_floor`)
-    and ``block_time`` (s)."""
-    own = guarded.piece * duration[guarded.owner]
-    least = np.maximum(rotary_block_floor(guarded.blocks.joints, limits), block_time)
-    return np.where(guarded.piece < 1.0, np.maximum(own, least), own)
+    and ``block_time`` (s). A piece's share is the larger of its share of the block's joint-space
+    line and of the tip's path along it (by FK: ``tool_length`` (M',) mm), so that no piece runs
+    the tip faster than its block did."""
+    piece = guarded.piece
+    split = piece < 1.0
+    if not split.any():
+        return duration[guarded.owner]
+    joints = guarded.blocks.joints
+    tip = forward_kinematics(machine, joints, tool_length=tool_length).tip
+    chord = np.r_[0.0, np.linalg.norm(np.diff(tip, axis=0), axis=1)]
+    total = np.bincount(guarded.owner, chord, minlength=len(duration))[guarded.owner]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tip_share = np.where(total > 0, chord / total, 0.0)
+    own = np.maximum(piece, tip_share) * duration[guarded.owner]
+    least = np.maximum(rotary_block_floor(joints, Limits.from_machine(machine)), block_time)
+    return np.where(split, np.maximum(own, least), own)
