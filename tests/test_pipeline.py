@@ -53,7 +53,8 @@ def read_gcode(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _walk(blocks: list[list[float]], cl: list[list[float]], rapid: list[bool], name: str,
           between: list[bool], block_axis: list[list[float]], cl_axis: list[list[float]]) -> np.ndarray:
     """(block, CL pose) pairs where a block ends on a CL pose; asserts every block end is on the
-    CL move it belongs to (1 micrometre), in order, except the ends of the moves between cuts
+    CL move it belongs to (CL poses to 1 micrometre, ends between them within the
+    tolerance), in order, except the ends of the moves between cuts
     (``between``: judged in tests/test_safe_motion.py) that reach no CL pose. Plain floats: one
     pass over 10^5 blocks; a move between cuts reaches a CL pose with its tip and axis)."""
     def close(p: list[float], a: list[float], limit: float = 1e-3) -> bool:
@@ -63,7 +64,9 @@ def _walk(blocks: list[list[float]], cl: list[list[float]], rapid: list[bool], n
         d = [b[i] - a[i] for i in range(3)]
         length2 = d[0] ** 2 + d[1] ** 2 + d[2] ** 2
         t = 0.0 if length2 == 0 else max(0.0, min(1.0, sum((p[i] - a[i]) * d[i] for i in range(3)) / length2))
-        return close(p, [a[i] + t * d[i] for i in range(3)])
+        # ends between CL poses: the linearisation's on the CL move; guard blocks at rotary corners
+        # (linuxcnc.blending) on the joint-space line, which keeps within the tolerance of it
+        return close(p, [a[i] + t * d[i] for i in range(3)], TOL)
 
     pairs, k = [], 0
     for m, point in enumerate(blocks):
