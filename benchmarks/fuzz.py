@@ -237,9 +237,7 @@ def run_reader_case(case: Case, timeout: float, keep: Path | None = None) -> Res
     except KeyboardInterrupt:
         raise
     except BaseException as exc:  # counting every crash is the point
-        frames = [f for f in traceback.extract_tb(exc.__traceback__) if "verne_post" in f.filename]
-        where = f"{Path(frames[-1].filename).relative_to(ROOT)}:{frames[-1].lineno}" if frames else "?"
-        result = Result("crash", "".join(traceback.format_exception(exc)), f"{type(exc).__name__} at {where}")
+        result = _crash(exc)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
     if keep is not None and result.outcome in ("crash", "hang"):
@@ -315,6 +313,13 @@ class Result:
     where: str = ""  # innermost verne_post frame of a crash
 
 
+
+def _crash(exc: BaseException) -> Result:
+    """A crash: the traceback, and where in verne_post it was raised."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if "verne_post" in f.filename]
+    where = f"{Path(frames[-1].filename).relative_to(ROOT)}:{frames[-1].lineno}" if frames else "?"
+    return Result("crash", "".join(traceback.format_exception(exc)), f"{type(exc).__name__} at {where}")
+
 def _on_timer(signum: int, frame: object) -> None:
     raise Hang()
 
@@ -344,9 +349,7 @@ def run_case(case: Case, timeout: float, keep: Path | None = None) -> Result:
     except KeyboardInterrupt:
         raise
     except BaseException as exc:  # counting every crash is the point
-        frames = [f for f in traceback.extract_tb(exc.__traceback__) if "verne_post" in f.filename]
-        where = f"{Path(frames[-1].filename).relative_to(ROOT)}:{frames[-1].lineno}" if frames else "?"
-        result = Result("crash", "".join(traceback.format_exception(exc)), f"{type(exc).__name__} at {where}")
+        result = _crash(exc)
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
     if result is None:
