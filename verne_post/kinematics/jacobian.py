@@ -46,6 +46,34 @@ def module_jacobian(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho
     return -np.linalg.solve(a, b)
 
 
+def closure_inverse(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(a^-1, d(pose)/d(rho)) of N module poses, entry-first ((4, 4, N) and (4, 3, N)): ``a`` is half
+    the derivative of eq. 3a, 3b, 4, 5 (mm^2) with respect to (xP, yP, zP, alpha) (mm, rad), so that
+    ``pose - a^-1 residuals / 2`` is a Newton step of the closure equations; d(pose)/d(rho) is
+    :func:`module_jacobian`'s, by the adjugate (no LAPACK call per pose). ``rho`` (N, 3) mm are readings."""
+    g = geom
+    rho = geom.true_joints(rho)
+    c, s = np.cos(alpha), np.sin(alpha)
+    x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
+    a = np.empty((4, 4, len(alpha)))
+    # the rows of _rod_vectors' rods (B - A) and their alpha terms, rods 1a, 1b, leg II, leg III
+    legs = ((g.R1, g.r1, g.D1_minus_d1, 0), (-g.R1, -g.r1, g.D1_minus_d1, 0), (-g.R2, -g.r4, g.D2_minus_d2, 1),
+            (g.R2, g.r4, g.D2_minus_d2, 2))
+    for k, (offset, slider_y, dx, slider) in enumerate(legs):
+        a[k, 0] = x + dx
+        a[k, 1] = y + offset * c - slider_y
+        a[k, 2] = z + offset * s - rho[:, slider]
+        a[k, 3] = offset * (a[k, 2] * c - a[k, 1] * s)
+    adj, det = _adjugate4(a)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = adj / det
+    # d(pose) = -a^-1 b d(rho), b's only entries -rod_z: rods 1a and 1b on slider 1, II on 2, III on 3
+    jac = np.stack([inverse[:, 0] * a[0, 2] + inverse[:, 1] * a[1, 2], inverse[:, 2] * a[2, 2],
+                    inverse[:, 3] * a[3, 2]], axis=1)
+    return inverse, jac
+
+
 def singularity_measures(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
                          ) -> tuple[np.ndarray, np.ndarray]:
     """(serial, parallel) margins in [0, 1] for N module poses; 0 is singular.

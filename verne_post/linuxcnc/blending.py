@@ -40,6 +40,7 @@ from ..machine import Machine
 from ..motion.linearise import Blocks, distance_to_segment
 from ..planning.controller import rotary_block_floor
 from ..planning.timing import Limits
+from .blend_bound import blend_estimate
 
 #: Where the blend is measured (s in the module docstring).
 SAMPLES = np.linspace(0.025, 0.975, 20)
@@ -149,29 +150,50 @@ def corner_guards(machine: Machine, blocks: Blocks, rapid: np.ndarray, tool_leng
     if not corner.size:
         return none
     budget = MARGIN * np.where(rapid[corner] | rapid[corner + 1], rapid_tol, tol)
-    deviation = blend_deviation(machine, joints[corner], step[corner - 1], step[corner], f1[corner - 1],
-                                f2[corner - 1], (blocks.tip[corner - 1], blocks.tip[corner], blocks.tip[corner + 1]),
-                                tool_length[corner])
-    over = deviation > budget
-    corner, budget, deviation = corner[over], budget[over], deviation[over]
+    f1, f2 = f1[corner - 1], f2[corner - 1]
+
+    def deviation(c: np.ndarray, share1: np.ndarray, share2: np.ndarray) -> np.ndarray:
+        """:func:`blend_deviation` at block ends ``c`` (the full kinematics)."""
+        return blend_deviation(machine, joints[c], step[c - 1], step[c], share1, share2,
+                               (blocks.tip[c - 1], blocks.tip[c], blocks.tip[c + 1]), tool_length[c])
+
+    def over(c: np.ndarray, share1: np.ndarray, share2: np.ndarray, limit: np.ndarray) -> np.ndarray:
+        """Where the blend at block ends ``c`` goes further than ``limit`` (mm): told by the estimate
+        and its bound (:func:`~verne_post.linuxcnc.blend_bound.blend_estimate`) where they can, by the
+        full kinematics where they cannot."""
+        estimate, bound = blend_estimate(machine, blocks, c, share1, share2, tool_length[c], SAMPLES)
+        surely = estimate - bound > limit
+        unsure = ~surely & (estimate + bound > limit)
+        if unsure.any():
+            surely[unsure] = deviation(c[unsure], share1[unsure], share2[unsure]) > limit[unsure]
+        return surely
+
+    # Where the blend may go over the budget, the full kinematics decides, and its deviation sets the
+    # guards' lengths; but where the estimate shows it over and below budget min(2 f1, f2) / MAX_GUARD,
+    # both guards come out MAX_GUARD whatever the deviation there (scale 1 below gives the same).
+    estimate, bound = blend_estimate(machine, blocks, corner, f1, f2, tool_length[corner], SAMPLES)
+    capped = (estimate - bound > budget) & (
+        estimate + bound < (1.0 - 1e-9) * budget * np.minimum(2.0 * f1, f2) / MAX_GUARD)
+    scale, guarded = np.where(capped, 1.0, 0.0), capped.copy()
+    near = np.flatnonzero(~capped & (estimate + bound > budget))
+    if near.size:
+        found = deviation(corner[near], f1[near], f2[near])
+        guarded[near] = found > budget[near]
+        scale[near] = np.clip(budget[near] / found, 0.0, 1.0)
+    corner, budget, f1, f2, scale = corner[guarded], budget[guarded], f1[guarded], f2[guarded], scale[guarded]
     if not corner.size:
         return none
-    f1, f2 = f1[corner - 1], f2[corner - 1]
     units = np.r_[np.full(3, 1e-4), np.full(2, np.radians(1e-5))]
     least = MIN_GUARD_UNITS / np.max(np.abs(step) / units, axis=1)  # (M - 1,) share per block
     # Each guard as long as the budget allows: LinuxCNC blends a block into its guard (a short block)
     # hardly at all, so the corner's blend, as large as the guards allow, is what saves time. The
-    # deviation grows about linearly with the shares: aim at the budget, then halve where not enough.
-    scale = np.clip(budget / deviation, 0.0, 1.0)
+    # deviation grows about linearly with the shares: aim at the budget (scale), then halve where not enough.
     g1 = np.clip(2.0 * f1 * scale, np.minimum(least[corner - 1], MAX_GUARD), MAX_GUARD)
     g2 = np.clip(f2 * scale, np.minimum(least[corner], MAX_GUARD), MAX_GUARD)
     pending = np.arange(len(corner))
     for _ in range(MAX_LEVELS):
-        found = blend_deviation(machine, joints[corner[pending]], step[corner[pending] - 1], step[corner[pending]],
-                                np.minimum(f1[pending], 0.5 * g1[pending]), np.minimum(f2[pending], g2[pending]),
-                                (blocks.tip[corner[pending] - 1], blocks.tip[corner[pending]],
-                                 blocks.tip[corner[pending] + 1]), tool_length[corner[pending]])
-        pending = pending[found > budget[pending]]
+        pending = pending[over(corner[pending], np.minimum(f1[pending], 0.5 * g1[pending]),
+                               np.minimum(f2[pending], g2[pending]), budget[pending])]
         shrink = (g1[pending] > least[corner[pending] - 1]) | (g2[pending] > least[corner[pending]])
         pending = pending[shrink]
         if not pending.size:
