@@ -111,17 +111,24 @@ def test_what_cannot_run_is_left_alone(machine: vp.Machine) -> None:
         assert out.blocks is given and np.array_equal(out.owner, np.arange(m))
 
 
-@pytest.mark.parametrize(("step", "turn", "share", "tight"), [(0.05, 0.05, 1.0, 1e-6), (0.4, 0.6, 1.0, 1e-6),
-                                                              (1.0, 0.2, 1.0, 1e-6), (2.0, 1.5, 0.5, 1e-4)])
+@pytest.mark.parametrize(("step", "turn", "share", "tight", "offsets"), [
+    (0.05, 0.05, 1.0, 1e-6, False), (0.4, 0.6, 1.0, 1e-6, False), (1.0, 0.2, 1.0, 1e-6, False),
+    (2.0, 1.5, 0.5, 1e-4, False), (0.4, 0.6, 1.0, 1e-6, True)])
 def test_the_blend_estimate_is_within_its_bound_of_the_full_kinematics(machine: vp.Machine, step: float, turn: float,
-                                                                       share: float, tight: float) -> None:
+                                                                       share: float, tight: float,
+                                                                       offsets: bool) -> None:
     """blend_bound's estimate against blend_deviation (the full FK at each of the 20 samples) at
     1,200 corners of a wandering path, at random shares of the blocks: they differ by no more than
     the bound, and the bound is finite (the estimate decides) at all corners of blocks of a few mm
     and at most of blocks of 8 to 40 mm (``share``; beyond its contraction the full FK decides), and
-    mostly far below the 0.004 mm budget of --tol 0.005 (``tight``)."""
-    rng = np.random.default_rng(int(100 * step))
-    blocks = _blocks(machine, int(10 * step), n=1200, step=step, turn=turn)
+    mostly far below the 0.004 mm budget of --tol 0.005 (``tight``). Also with joint zero offsets
+    (joints read by the controller, not the true ones)."""
+    if offsets:
+        zeros = {name: getattr(machine.joints, name).model_copy(update={"offset": offset}) for name, offset in
+                 (("rho1", 0.7), ("rho2", -1.3), ("rho3", 0.4), ("theta1", 0.3), ("theta2", -2.0))}
+        machine = machine.model_copy(update={"joints": machine.joints.model_copy(update=zeros)})
+    rng = np.random.default_rng(int(100 * step) + offsets)
+    blocks = _blocks(machine, int(10 * step) + offsets, n=1200, step=step, turn=turn)
     q, tips = blocks.joints, blocks.tip
     corner = np.arange(1, len(q) - 1)
     f1, f2 = rng.uniform(0.0, 0.5, len(corner)), rng.uniform(0.0, 0.5, len(corner))
