@@ -71,7 +71,11 @@ def blend_estimate(machine: Machine, blocks: Blocks, corner: np.ndarray, f1: np.
         known = np.all(np.isfinite(platform), axis=1) & np.isfinite(alpha)
         known[known] = closure_ok(g, platform[known], alpha[known], joints[rows[known], :3])
     inverse, jacobian = closure_inverse(g, platform, alpha, blocks.joints[rows, :3])
+    known &= np.all(np.isfinite(inverse), axis=(0, 1))  # not at a singularity of the module
     pose = np.r_[platform.T, alpha[None]]  # (4, R)
+    # the corners at other block ends are not estimated (their bound is infinite): zeros keep the
+    # arithmetic quiet
+    pose[:, ~known], inverse[:, :, ~known], jacobian[:, :, ~known] = 0.0, 0.0, 0.0
     at = [(np.cumsum(used) - 1)[corner + j] for j in (-1, 0, 1)]  # before, corner, after in rows
     q_c, d1, d2 = joints[corner], joints[corner] - joints[corner - 1], joints[corner + 1] - joints[corner]
 
@@ -175,7 +179,7 @@ def _turned(angle: np.ndarray, cos: np.ndarray, sin: np.ndarray, delta: np.ndarr
     series as leave the next below ``TAYLOR_REMAINDER`` (a few multiplications instead of a libm
     call; libm beyond 0.1 rad)."""
     largest = np.abs(delta).max(initial=0.0)
-    if largest > 0.1:
+    if not largest <= 0.1:
         turned = angle + delta
         return np.cos(turned), np.sin(turned)
     d2 = delta * delta
