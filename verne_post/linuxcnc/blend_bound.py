@@ -86,23 +86,20 @@ def blend_estimate(machine: Machine, blocks: Blocks, corner: np.ndarray, f1: np.
     m_1, m_c, m_2 = (pose[:, i] for i in at)
     j_1, j_c, j_2 = (jacobian[:, :, i] for i in at)
     c1, p1, c2, n2 = along(j_c, d1), along(j_1, d1), along(j_c, d2), along(j_2, d2)
-    mixed = -0.5 * (along(j_2 - j_c, d1) + along(j_c - j_1, d2))  # d2(pose)/da db
+    mixed = -0.5 * (along(j_2, d1) - c1 + c2 - along(j_1, d2))  # d2(pose)/da db
     # The interpolant's coefficients of (1, A, A^2, A^3, B, B^2, B^3, A B) (a = f1 A, b = f2 B): the
     # pose (alpha from the corner's) by cubic Hermite along each block, d(pose)/da = -c1 at a = 0 and
-    # -p1 at a = 1; zP - rho_i (the joints are linear in A and B); the table angles from the corner's.
+    # -p1 at a = 1. The joints are linear in A and B: q_c + A back + B ahead.
     k = len(corner)
-    coefficients = np.zeros((8, 9, k))
+    coefficients = np.zeros((8, 4, k))
     coefficients[0, :3] = m_c[:3]
-    coefficients[1, :4], coefficients[4, :4] = -f1 * c1, f2 * c2
-    coefficients[2, :4] = f1 * f1 * (3.0 * (m_1 - m_c) + 2.0 * c1 + p1)
-    coefficients[3, :4] = f1 * f1 * f1 * (2.0 * (m_c - m_1) - c1 - p1)
-    coefficients[5, :4] = f2 * f2 * (3.0 * (m_2 - m_c) - 2.0 * c2 - n2)
-    coefficients[6, :4] = f2 * f2 * f2 * (2.0 * (m_c - m_2) + c2 + n2)
-    coefficients[7, :4] = f1 * f2 * mixed
-    coefficients[:, 4:7] = coefficients[:, 2:3]  # zP - rho_i: zP's terms ...
-    coefficients[0, 4:7] -= q_c[:, :3].T  # ... and rho_i's, linear in A and B
-    coefficients[1, 4:9] -= f1 * d1.T * _JOINT_SIGN
-    coefficients[4, 4:9] += f2 * d2.T * _JOINT_SIGN
+    coefficients[1], coefficients[4] = -f1 * c1, f2 * c2
+    coefficients[2] = f1 * f1 * (3.0 * (m_1 - m_c) + 2.0 * c1 + p1)
+    coefficients[3] = f1 * f1 * f1 * (2.0 * (m_c - m_1) - c1 - p1)
+    coefficients[5] = f2 * f2 * (3.0 * (m_2 - m_c) - 2.0 * c2 - n2)
+    coefficients[6] = f2 * f2 * f2 * (2.0 * (m_c - m_2) + c2 + n2)
+    coefficients[7] = f1 * f2 * mixed
+    back, ahead = -f1[:, None] * d1, f2[:, None] * d2
     # the bound's factor of |Phi| (module docstring)
     inv = inverse[:, :, at[1]]
     norm_p = np.sqrt(np.sum(inv[:3] ** 2, axis=(0, 1)))
@@ -121,7 +118,7 @@ def blend_estimate(machine: Machine, blocks: Blocks, corner: np.ndarray, f1: np.
     for start in range(0, k, CHUNK):
         part = slice(start, start + CHUNK)
         estimate[part], residual[part], working = _samples(
-            g, basis, np.ascontiguousarray(coefficients[:, :, part]),
+            g, basis, np.ascontiguousarray(coefficients[:, :, part]), (q_c[part], back[part], ahead[part]),
             [(angle[part], cos[part], sin[part]) for angle, cos, sin in turns], delta[part],
             [tip[part] for tip in tips])
         valid[part] &= working
@@ -129,17 +126,22 @@ def blend_estimate(machine: Machine, blocks: Blocks, corner: np.ndarray, f1: np.
     return estimate, np.where(valid & np.isfinite(estimate) & np.isfinite(bound), bound, np.inf)
 
 
-def _samples(g: Geometry, basis: np.ndarray, coefficients: np.ndarray,
+def _samples(g: Geometry, basis: np.ndarray, coefficients: np.ndarray, lines: tuple[np.ndarray, ...],
              turns: list[tuple[np.ndarray, np.ndarray, np.ndarray]], delta: np.ndarray,
              tips: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For K corners: the blend's largest distance from the CL path (mm), the largest closure residual
     |Phi| (mm^2) and whether every sample is in the machine's working mode, each (K,), from the
-    interpolant (``basis`` (S, 8) and ``coefficients`` (8, 9, K): :func:`blend_estimate`), the
-    corner's (alpha, theta1, theta2) as (angle, cos, sin), ``delta`` (P to tip, mm) and the CL
-    ``tips`` before, at and after the corner."""
+    interpolant (``basis`` (S, 8) and ``coefficients`` (8, 4, K): :func:`blend_estimate`), the
+    joints' ``lines`` (true q_c, back, ahead: (K, 5) each, q = q_c + A back + B ahead), the corner's
+    (alpha, theta1, theta2) as (angle, cos, sin), ``delta`` (P to tip, mm) and the CL ``tips``
+    before, at and after the corner."""
     k = coefficients.shape[-1]
-    x, y, z, d_alpha, w1, w2, w3, d_theta1, d_theta2 = np.einsum(
-        "sn,nk->sk", basis, coefficients.reshape(8, -1)).reshape(len(basis), 9, k).transpose(1, 0, 2)
+    x, y, z, d_alpha = np.einsum("sn,nk->sk", basis, coefficients.reshape(8, -1)).reshape(len(basis), 4, k
+                                                                                          ).transpose(1, 0, 2)
+    q_c, back, ahead = lines
+    a, b = basis[:, 1:2], basis[:, 4:5]
+    w1, w2, w3 = (z - (q_c[:, i] + a * back[:, i] + b * ahead[:, i]) for i in range(3))  # zP - rho_i
+    d_theta1, d_theta2 = (a * back[:, i] + b * ahead[:, i] for i in (3, 4))
     ca, sa = _turned(*turns[0], d_alpha)
     # the closure residuals (eq. 3a, 3b, 4, 5; kinematics.module.closure_residuals) at the sliders
     x1, x2 = (x + g.D1_minus_d1) ** 2, (x + g.D2_minus_d2) ** 2
@@ -167,10 +169,6 @@ def _samples(g: Geometry, basis: np.ndarray, coefficients: np.ndarray,
         distance2 = (px - u * e[:, 0]) ** 2 + (py - u * e[:, 1]) ** 2 + (pz - u * e[:, 2]) ** 2
         nearest = distance2 if nearest is None else np.minimum(nearest, distance2)
     return np.sqrt(nearest.max(axis=0)), np.sqrt(phi2.max(axis=0)), working
-
-
-#: The joints' rows of the interpolant: zP - rho_i falls as rho_i rises; the table angles as they are.
-_JOINT_SIGN = np.array([-1.0, -1.0, -1.0, 1.0, 1.0])[:, None]
 
 
 def _turned(angle: np.ndarray, cos: np.ndarray, sin: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
