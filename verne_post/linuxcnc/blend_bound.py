@@ -13,7 +13,8 @@ checked on the closure equations eq. 3a-5) with its slider Jacobian
 (:func:`~verne_post.kinematics.jacobian.closure_inverse`). m~ is the cubic Hermite interpolant
 along each block (a or b alone) plus the mixed term a b d2m/da db (the mean of its two differences
 of the Jacobians): a few multiplications per sample instead of the FK's secant iterations. The
-table angles, the tool pose of m~ (eq. 32-33) and the distances to the CL segments are exact.
+table angles, the tool pose of m~ (eq. 32-33) and the distances to the CL segments are exact (sin
+and cos of the table angles' small steps from their Taylor series, to 1e-16).
 
 The bound. Phi(m) (mm^2), the closure residuals at the sample's sliders, is 0 at the true pose m*;
 its derivative is 2 a(m) (a: the rods and their alpha terms). Norms count alpha as R1 alpha (mm):
@@ -44,13 +45,14 @@ from ..kinematics.module import closure_ok
 from ..machine import Machine
 from ..motion.linearise import Blocks
 
-#: mm: the full kinematics' own rounding (its secant stops at steps of 1e-15 rad) and this one's.
+#: mm: the full kinematics' own rounding (its secant stops at steps of 1e-15 rad) and this one's
+#: (sin and cos of the table angles to ``TAYLOR_REMAINDER``).
 ROUNDING = 1e-9
 #: Largest q (module docstring) the bound is used with; beyond it the full kinematics decides.
 MAX_CONTRACTION = 0.5
 #: rad: the first Taylor term of sin and cos left out (a sample's angles from the corner's).
 TAYLOR_REMAINDER = 1e-16
-#: Corners per pass: the (samples, corners) arrays of a pass stay in a core's cache.
+#: Corners per pass: the (samples, corners) arrays of a pass stay small (160 kB each).
 CHUNK = 1024
 
 
@@ -135,9 +137,9 @@ def _samples(g: Geometry, basis: np.ndarray, coefficients: np.ndarray, lines: tu
     joints' ``lines`` (true q_c, back, ahead: (K, 5) each, q = q_c + A back + B ahead), the corner's
     (alpha, theta1, theta2) as (angle, cos, sin), ``delta`` (P to tip, mm) and the CL ``tips``
     before, at and after the corner."""
-    k = coefficients.shape[-1]
-    x, y, z, d_alpha = np.einsum("sn,nk->sk", basis, coefficients.reshape(8, -1)).reshape(len(basis), 4, k
-                                                                                          ).transpose(1, 0, 2)
+    # einsum, not matmul: OpenBLAS's threads, spinning between calls, made these 50 times slower on 2 busy cores
+    pose = np.einsum("sn,nk->sk", basis, coefficients.reshape(8, -1))
+    x, y, z, d_alpha = pose.reshape(len(basis), 4, -1).transpose(1, 0, 2)
     q_c, back, ahead = lines
     a, b = basis[:, 1:2], basis[:, 4:5]
     w1, w2, w3 = (z - (q_c[:, i] + a * back[:, i] + b * ahead[:, i]) for i in range(3))  # zP - rho_i
