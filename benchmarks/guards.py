@@ -61,9 +61,9 @@ def main() -> None:
         for fast, full in zip(*found.values(), strict=True):
             if not (np.array_equal(fast[0], full[0]) and np.array_equal(fast[1], full[1])):
                 raise SystemExit("the guards differ")
-    corners = sum(len(given[1].joints) for given, _ in parts)  # type: ignore[attr-defined]
-    guards = sum(int(np.count_nonzero(g[0])) for g in found["full kinematics"])
-    print(f"{len(parts)} parts, {corners} blocks, {guards} corners guarded; the same guards both ways")
+    blocks = sum(len(given[1].joints) for given, _ in parts)  # type: ignore[attr-defined]
+    guarded = sum(int(np.count_nonzero(before)) for before, _ in found["full kinematics"])
+    print(f"{len(parts)} parts, {blocks} blocks, {guarded} corners guarded; the same guards both ways")
     base = statistics.median(seconds["full kinematics"])
     for name, values in seconds.items():
         print(f"corner_guards, {name:20s} median {statistics.median(values):6.3f} s  ratio "
