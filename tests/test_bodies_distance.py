@@ -18,7 +18,7 @@ import verne_post as vp
 from tests.conftest import random_usable_joints
 from tests.independent import table_transform
 from verne_post.bodies.convex import Boxes, Capsules, Cylinders, distance
-from verne_post.bodies.layout import place, tool_stack
+from verne_post.bodies.layout import link_radii, place, tool_stack
 from verne_post.kinematics.module import module_fk_working
 
 PAIRS = 200  # per combination of kinds
@@ -160,10 +160,12 @@ def test_the_head_bodies_sit_on_the_tool_axis_from_the_tip(machine: vp.Machine) 
     transform = table_transform(g, joints[:, 3], joints[:, 4])  # table -> base, (N, 4, 4)
     centre = 0.5 * (placed.links[:, 4, 0] + placed.links[:, 4, 1])
     back = np.einsum("nji,nj->ni", transform[:, :3, :3], centre - transform[:, :3, 3])
-    assert np.allclose(back, 0.5 * (placed.links_table[:, 4, 0] + placed.links_table[:, 4, 1]), atol=1e-9)
-    # the rods between their joint centres: each as long as its leg's rods (the paper's L1, L2, L3)
+    assert np.allclose(back, 0.5 * (placed.platform_table[:, 0] + placed.platform_table[:, 1]), atol=1e-9)
+    # the rods end at their joint centres: each as long as its leg's rods (the paper's L1, L2, L3)
+    # with its round ends, its axis its diameter shorter
     lengths = np.linalg.norm(placed.links[:, :4, 1] - placed.links[:, :4, 0], axis=2)
-    assert np.allclose(lengths, [g.L1, g.L1, g.L2, g.L3], atol=1e-6)
+    radii = link_radii(machine.bodies)[:4]
+    assert np.allclose(lengths + 2.0 * radii, [g.L1, g.L1, g.L2, g.L3], atol=1e-6)
 
 
 def test_capsules_shrunk_to_points_and_parallel_ones_against_brute_force() -> None:

@@ -280,7 +280,8 @@ def _parts(machine: Machine, poses: MachinePoses, options: PostOptions, size: in
         warnings = theta2_rate_warnings(machine, blocks.joints, blocks.tip, rapid, poses.line[blocks.pose],
                                         poses.source)
         lap("checks")
-        collisions = check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip, world)
+        collisions = check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip, world,
+                                      alpha=blocks.result.alpha)
         checks += collisions.violations
         warnings += collisions.warnings
         lap("collisions")

@@ -1,23 +1,52 @@
 """The clearance of every checked pair of bodies along a joint-space motion, with a sampling bound.
 
 A motion is a chain of block ends (joints mm, rad); the controller runs each block on its
-straight joint-space line. For a pair of bodies and a stretch of a block between two samples
-s_a and s_b, let m be an upper bound of how far any point of the moving body travels relative
-to the other between them. Then at every point of the stretch the clearance d satisfies
+straight joint-space line q(t) = q_a + t (q_b - q_a), t in [0, 1]. For a pair of bodies and a
+stretch between two samples s_a and s_b, let m bound the SPEED (mm per unit t) of every point of
+the moving body relative to the other, everywhere on the stretch. A point is then within m t of
+where it was at s_a and within m (1 - t) of where it will be at s_b, so at every t the clearance is
 
-    d >= (d(s_a) + d(s_b) - m) / 2
+    d(t) >= max(d(s_a) - m t, d(s_b) - m (1 - t)) >= (d(s_a) + d(s_b) - m) / 2.
 
-(a point reached after travelling p from s_a is within p of where it was, and within m - p of
-where it will be). m is taken as KAPPA times the largest displacement of the body's axis end
-points between the samples plus its radius times the turn of its axis (a rigid body of
-revolution: every point is an affine mix of the end points plus a radial offset); KAPPA covers
-the path's bend between two samples, which bisection makes small. A stretch whose bound is
-under the near-miss margin is bisected (forward kinematics at its middle) until the bound
-clears the margin, or is no lower than the block's least sampled clearance less RESOLUTION
-(branch and bound: it cannot hold a smaller one; a collision found ends the block's search), or
-the stretch moves less than RESOLUTION mm; the clearance reported is then the least bound.
-Distances are certified lower bounds (:mod:`verne_post.bodies.convex`); far pairs are first
-judged by bounding spheres. Units: mm, rad.
+m is a sum over the joints, never a chord (a chord hides motions that cancel: a slider moving a
+point one way while the table turns it back; measured, a chord-based bound was exceeded 2 to 6
+times on long stretches). The bodies are rigid bodies of revolution, so take their points without
+spin about their axes. With s = |rho_b - rho_a| (mm) and dtheta1, dtheta2 (rad) the stretch's
+steps, every point of a body on the platform (the head's bodies, the platform) moves in the base
+frame at most
+
+    m_base = (G + A l) s,   G = K_J max ||dP/drho||_F,   A = K_J max |d alpha/drho|,
+
+the norms of the module's Jacobian (:func:`verne_post.kinematics.module_jacobian`) at the two
+samples, l the point's distance from the platform's tilt axis (x through P), constant on the
+rigid platform. K_J = 1.25 covers the Jacobian between the samples: over 6,000 random stretches
+of up to 100 mm its norms never exceeded the larger end's by more than 0.8 % (1.03 at 200 mm);
+a stretch of more than MAX_SLIDER_STEP (100 mm) is split before any bound is taken. A rod's
+points mix its slider end (speed at most s) and its platform end, plus its radius times the turn
+of its axis (at most the ends' speeds over its length). Seen from the table side the base turns:
+in the cradle frame add dtheta1 times the point's distance from the cradle axis, in the table
+frame also dtheta2 times its distance from the table axis. Those distances are taken at the
+samples (the larger), grown by m / 2, the most a point can move away from both samples:
+m = (m_base + dtheta1 (c1 + m_base / 2) + dtheta2 c2) / (1 - dtheta2 / 2). A stretch turning
+more than MAX_TURN (0.5 rad) is split first, too. :class:`Samples` carries each body's levers
+(G + A l, c1, c2) at each sample.
+
+A stretch whose bound is under the near-miss margin is cut into as many equal pieces as its
+bound asks for (forward kinematics at the cuts) until the bound clears the margin, or is no
+lower than the block's least sampled clearance less RESOLUTION (branch and bound: it cannot hold
+a smaller one; a collision found ends the block's search), or the stretch moves less than
+RESOLUTION mm; the clearance reported is then the least bound over the block's stretches.
+Distances are certified lower bounds (:mod:`verne_post.bodies.convex`).
+
+Most pairs are far on most blocks, so they are first judged a WINDOW of blocks at a time. Every
+point of the body swept over a window's blocks lies within R = r + D + M / 2 of the body's axis
+at the window's first end: r its largest radius there, D the largest displacement of an axis end
+point from that first end over the window's ends (a point of the axis is an affine mix of its end
+points), M the largest bound m of a block in it (by the above, a point between two samples is
+within m / 2 of where it was at one of them). The window's capsule (the first end's axis, radius
+R) is judged against the other body (its own window capsule, or the fixed body) by the certified
+bounds; where that clears the margin, it is the clearance of every block of the window. Only the
+other windows go through the blocks' ends, spheres first, as above. Units: mm, rad.
 """
 
 from __future__ import annotations
@@ -29,11 +58,18 @@ import numpy as np
 
 from .convex import Boxes, Capsules, Convex, Cylinders, distance, quick_bound, rows
 
-#: The path of a body point between two samples is at most this many times the chord.
-KAPPA = 1.25
-#: mm: a stretch that moves less is not bisected further.
+#: The module Jacobian's norms between two samples are at most this many times the larger end's.
+K_J = 1.25
+#: mm, rad: a longer stretch (slider steps' norm, both turns together) is split before a bound is taken.
+MAX_SLIDER_STEP = 100.0
+MAX_TURN = 0.5
+#: mm: a stretch whose bound is less is not cut further; rounds of cutting at most.
 RESOLUTION = 0.05
 MAX_LEVELS = 18
+#: A stretch is cut into at most this many pieces at a time.
+MAX_PIECES = 64
+#: Blocks judged together first (module docstring).
+WINDOW = 16
 
 
 @dataclass(frozen=True)
@@ -42,6 +78,11 @@ class Samples:
 
     bodies: dict[str, np.ndarray]  # name -> (S, 2, 3) axis end points in the pair's frame
     radius: dict[str, np.ndarray]  # name -> (S,) mm
+    alpha: np.ndarray  # (S,) rad: the platform's tilt, a warm start for samples between them
+    #: name -> (S, 3) the body's levers (module docstring): mm of its fastest point's motion per
+    #: mm of slider travel (K_J included), and its distances (mm) from the cradle's axis and the
+    #: table's, each 0 where the body's frame does not turn with that axis
+    levers: dict[str, np.ndarray]
 
 
 @dataclass(frozen=True)
@@ -87,65 +128,111 @@ def _norm(v: np.ndarray) -> np.ndarray:
     return np.sqrt(np.einsum("...i,...i->...", v, v))
 
 
-def _motion(ends_a: np.ndarray, ends_b: np.ndarray, radius: np.ndarray) -> np.ndarray:
-    """mm: the bound of how far a point of the body moves between two placements (see module)."""
-    shift = np.maximum(_norm(ends_b[:, 0] - ends_a[:, 0]), _norm(ends_b[:, 1] - ends_a[:, 1]))
+def _motion(q_a: np.ndarray, q_b: np.ndarray, levers_a: np.ndarray, levers_b: np.ndarray) -> np.ndarray:
+    """mm: the bound m of every point's speed (per unit of the line's parameter) on the stretches
+    from joints ``q_a`` to ``q_b`` (N, 5) (mm, rad), the body's levers (N, 3) at both (module
+    docstring); inf where the stretch is too long to be bounded (it is split), NaN where an end is
+    unknown."""
+    step = q_b - q_a
+    slider = np.sqrt(np.einsum("ij,ij->i", step[:, :3], step[:, :3]))
+    turn1, turn2 = np.abs(step[:, 3]), np.abs(step[:, 4])
+    lever = np.maximum(levers_a, levers_b)
+    base = lever[:, 0] * slider
+    bound = (base + turn1 * np.where(lever[:, 1] > 0, lever[:, 1] + 0.5 * base, 0.0)
+             + turn2 * lever[:, 2]) / np.where(lever[:, 2] > 0, 1.0 - 0.5 * turn2, 1.0)
+    return np.where((slider <= MAX_SLIDER_STEP) & (turn1 + turn2 <= MAX_TURN), bound, np.inf)
 
-    def direction(ends: np.ndarray) -> np.ndarray:
-        span = ends[:, 1] - ends[:, 0]
-        size = _norm(span)[:, None]
-        return span / np.where(size > 0, size, 1.0)
 
-    turn = _norm(direction(ends_b) - direction(ends_a))
-    return KAPPA * (shift + radius * 1.1 * turn)
+Place = Callable[[np.ndarray, np.ndarray, np.ndarray | None, frozenset[str] | None], Samples]
 
 
-def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np.ndarray], Samples],
+def clear_motion(joints: np.ndarray, place: Place,
                  tool: np.ndarray, pairs: list[Pair], margin: float, cap: float = 100.0,
-                 first_collision: bool = False) -> ClearanceResult:
+                 first_collision: bool = False, alpha_guess: np.ndarray | None = None) -> ClearanceResult:
     """The clearance along the motion through block ends ``joints`` (M, 5) (mm, rad; block k runs
     from end k-1 to end k, block 0 is the positioning before the program and is only sampled at
-    its end). ``place(joints, tool, alpha_guess)`` gives the bodies at joint sets (NaN where out of
+    its end). ``place(joints, tool, alpha_guess, names)`` gives the bodies (at least ``names``; None:
+    all) at joint sets (NaN where out of
     reach) with tool ``tool`` (per joint set: an index of the tools' stacks). Pairs in
     ``pairs``; a clearance under ``margin`` (mm) is a contact. With ``first_collision`` it stops
-    after the first pair that meets (the motion fails: how else is not asked)."""
+    after the first pair that meets (the motion fails: how else is not asked). ``alpha_guess`` (M,)
+    rad: the platform's tilt at the block ends where known (a warm start of the kinematics).
+    Blocks longer than the bound takes (MAX_SLIDER_STEP, MAX_TURN) are first cut into equal
+    stretches on their lines, once for every pair."""
+    pieces = _pieces(joints)
+    if np.any(pieces > 1):
+        return _in_pieces(joints, pieces, place, tool, pairs, margin, cap, first_collision, alpha_guess)
     m = len(joints)
     known = np.all(np.isfinite(joints), axis=1)
-    ends = place(joints, tool, None)
+    moving = frozenset(name for pair in pairs for name in (pair.moving, pair.other if pair.fixed is None else ""))
+    ends = place(joints, tool, alpha_guess, moving)
     smallest = np.full(m, cap)
     contacts: list[Contact] = []
     left, right = np.arange(m - 1), np.arange(1, m)
     usable = known[:-1] & known[1:]
-    shapes: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+    shapes: dict[str, tuple[np.ndarray, Capsules]] = {}
+    moves: dict[int, np.ndarray] = {}
+    # block k (ends k - 1 -> k) is in window (k - 1) // WINDOW; a window's last end is the next one's first
+    windows = max(-(-(m - 1) // WINDOW), 0)
 
-    def shape(name: str, kind: type) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """A moving body's centres, bounding radii and motion bound per block (each body once)."""
+    def shape(name: str) -> tuple[np.ndarray, Capsules]:
+        """A moving body's motion bound per block and its capsule per window (each body once)."""
         if name not in shapes:
-            body_ends, r = ends.bodies[name], ends.radius[name]
-            half = 0.5 * _norm(body_ends[:, 1] - body_ends[:, 0])
-            reach = half + r if kind is Capsules else np.hypot(half, r)
-            shapes[name] = (0.5 * (body_ends[:, 0] + body_ends[:, 1]), reach,
-                            _motion(body_ends[:-1], body_ends[1:], np.maximum(r[:-1], r[1:])))
+            body_ends, r, levers = ends.bodies[name], ends.radius[name], ends.levers[name]
+            if id(levers) not in moves:  # pieces of one body share its levers
+                moves[id(levers)] = _motion(joints[:-1], joints[1:], levers[:-1], levers[1:])
+            move = moves[id(levers)]
+            shapes[name] = (move, _windows(body_ends, r, move, windows))
         return shapes[name]
 
-    for pair in pairs:
-        centre_a, reach_a, move = shape(pair.moving, pair.kind)
-        if pair.fixed is not None:
-            reach_b = pair.fixed.reach()[0]
-            centre_b = pair.fixed.centre()[0]
+    def sphere_of(name: str, kind: type, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A moving body's centres and bounding radii at the ends ``index``."""
+        body_ends, r = ends.bodies[name][index], ends.radius[name][index]
+        half = 0.5 * _norm(body_ends[:, 1] - body_ends[:, 0])
+        return 0.5 * (body_ends[:, 0] + body_ends[:, 1]), (half + r if kind is Capsules else np.hypot(half, r))
+
+    # every pair's windows at once: pairs with a fixed body of one kind, and pairs of moving capsules
+    window_clearance: dict[int, np.ndarray] = {}
+    for kind in {type(pair.fixed) for pair in pairs}:
+        members = [k for k, pair in enumerate(pairs) if type(pair.fixed) is kind]
+        moving_windows = _joined([shape(pairs[k].moving)[1] for k in members])
+        if kind is type(None):
+            found = distance(moving_windows, _joined([shape(pairs[k].other)[1] for k in members]))
         else:
-            centre_b, reach_b, b_move = shape(pair.other, Capsules)
-            move = move + b_move
-        sphere = np.maximum(_norm(centre_a - centre_b) - reach_a - reach_b, 0.0)
+            fixed = _joined([rows(pairs[k].fixed, np.zeros(windows, int)) for k in members])
+            found = quick_bound(moving_windows, fixed)
+        for k, part in zip(members, np.split(found, len(members)), strict=True):
+            window_clearance[k] = part
+
+    for k, pair in enumerate(pairs):
+        move = shape(pair.moving)[0] if pair.fixed is not None else shape(pair.moving)[0] + shape(pair.other)[0]
+        window = window_clearance[k]
+        clear_window = np.isfinite(window) & (window >= margin)  # every block of the window clears
+        clear_block = np.repeat(clear_window, WINDOW)[:m - 1]
+        # the ends the other windows need (their first and last too)
+        judged = np.zeros(m, bool)
+        judged[:-1] |= ~clear_block
+        judged[1:] |= ~clear_block
+        judged[0] |= not windows or not clear_window[0]
+        sphere = np.full(m, np.inf)
+        rows_ = np.flatnonzero(judged & known)
+        centre_a, reach_a = sphere_of(pair.moving, pair.kind, rows_)
+        if pair.fixed is not None:
+            centre_b, reach_b = pair.fixed.centre()[0], pair.fixed.reach()[0]
+        else:
+            centre_b, reach_b = sphere_of(pair.other, Capsules, rows_)
+        sphere[rows_] = np.maximum(_norm(centre_a - centre_b) - reach_a - reach_b, 0.0)
         # the slabs about the centres' direction and the bodies' faces: most pairs settle here
-        rows_ = np.flatnonzero(known & (sphere < margin + 1.0))
+        rows_ = rows_[sphere[rows_] < margin + 1.0]
         if rows_.size:
             sphere[rows_] = np.maximum(sphere[rows_], quick_bound(*_pair_bodies(pair, ends, rows_)))
-        sphere = np.where(known, sphere, np.inf)
         active = np.ones(m, bool) if pair.active is None else pair.active
         # block k (ends k-1 -> k) is checked where the pair is active on it; block 0 at its end
         check_end = known & active
-        lb = np.where(usable & active[1:], 0.5 * (sphere[:-1] + sphere[1:] - move), np.inf)
+        # per block: its window's bound where that clears, else the bound from its ends' clearances
+        sampled = usable & active[1:] & ~clear_block
+        window_bound = np.where(clear_block & active[1:], np.repeat(window, WINDOW)[:m - 1], np.inf)
+        lb = np.where(sampled, 0.5 * (sphere[:-1] + sphere[1:] - move), window_bound)
         near = np.flatnonzero((lb < margin) | (check_end[1:] & (sphere[1:] < margin)))
         at0 = check_end[0] and sphere[0] < margin
         if not near.size and not at0:
@@ -156,9 +243,9 @@ def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np
         need = need[known[need]]
         exact = sphere.copy()
         exact[need] = _distance(pair, ends, need, margin)
-        lb = np.where(usable & active[1:], 0.5 * (exact[:-1] + exact[1:] - move), np.inf)
+        lb = np.where(sampled, 0.5 * (exact[:-1] + exact[1:] - move), window_bound)
         # a block whose bound clears the margin has at least that bound; the others get their
-        # ends' clearances here and the bisection's least bound below
+        # ends' clearances here and the refinement's least bound below
         value = np.where(lb >= margin, np.minimum(lb, exact[1:]), exact[1:])
         np.minimum(smallest[1:], np.where(active[1:], value, cap), out=smallest[1:])
         if at0 and exact[0] < margin:
@@ -166,10 +253,69 @@ def clear_motion(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np
             contacts.append(Contact(0, 1.0, pair.moving, pair.other, float(exact[0])))
         open_ = np.flatnonzero(lb < margin)
         if open_.size:
-            contacts += _bisect(joints, place, tool, pair, open_, exact, margin, smallest)
+            contacts += _refine(joints, place, tool, pair, open_, exact, margin, smallest, ends.alpha)
         if first_collision and any(c.clearance <= 0.0 for c in contacts):
             break
     return ClearanceResult(tuple(contacts), smallest, cap)
+
+
+def _pieces(joints: np.ndarray) -> np.ndarray:
+    """(M,) the equal stretches each block is cut into so that none is too long for the bound
+    (block 0, the positioning, and blocks with an unknown end: 1)."""
+    step = np.abs(np.diff(joints, axis=0))
+    need = np.maximum(np.sqrt(np.einsum("ij,ij->i", step[:, :3], step[:, :3])) / MAX_SLIDER_STEP,
+                      (step[:, 3] + step[:, 4]) / MAX_TURN)
+    with np.errstate(invalid="ignore"):
+        count = np.where(np.isfinite(need) & (need > 1.0), np.ceil(need * (1.0 + 1e-9)), 1.0)
+    return np.r_[1, np.minimum(count, 1e6)].astype(int)
+
+
+def _in_pieces(joints: np.ndarray, pieces: np.ndarray, place: Place, tool: np.ndarray, pairs: list[Pair],
+               margin: float, cap: float, first_collision: bool, alpha_guess: np.ndarray | None) -> ClearanceResult:
+    """:func:`clear_motion` with block k cut into ``pieces[k]`` equal stretches, and its results
+    told per block again (a block's least clearance over its stretches)."""
+    owner = np.repeat(np.arange(len(joints)), pieces)  # the block of each stretch
+    first = np.cumsum(pieces) - pieces
+    share = (np.arange(len(owner)) - first[owner] + 1) / pieces[owner]  # along its block, 1 at its end
+    start = joints[np.maximum(owner - 1, 0)]
+    refined = np.where((share == 1.0)[:, None], joints[owner], start + share[:, None] * (joints[owner] - start))
+    guess = None
+    if alpha_guess is not None:
+        a = np.nan_to_num(alpha_guess)
+        guess = a[np.maximum(owner - 1, 0)] + share * (a[owner] - a[np.maximum(owner - 1, 0)])
+    split = [Pair(p.moving, p.other, p.kind, p.fixed, None if p.active is None else p.active[owner]) for p in pairs]
+    found = clear_motion(refined, place, tool[owner], split, margin, cap, first_collision, guess)
+    smallest = np.full(len(joints), cap)
+    np.minimum.at(smallest, owner, found.smallest)
+    contacts = tuple(Contact(int(owner[c.block]), float((share[c.block] * pieces[owner[c.block]] - 1 + c.fraction)
+                                                         / pieces[owner[c.block]]), c.moving, c.other, c.clearance)
+                     for c in found.contacts)
+    return ClearanceResult(contacts, smallest, cap)
+
+
+def _joined(bodies: list[Convex]) -> Convex:
+    """Bodies of one kind, the rows of each after the other's."""
+    first = bodies[0]
+    return type(first)(*(np.concatenate([getattr(b, name) for b in bodies]) for name in first.__dataclass_fields__))
+
+
+def _windows(body_ends: np.ndarray, radius: np.ndarray, move: np.ndarray, count: int) -> Capsules:
+    """Per window of :data:`WINDOW` blocks (``count`` of them, from the first end), a capsule holding
+    the body (axis end points ``body_ends`` (M, 2, 3) mm, ``radius`` (M,) mm, motion bound ``move``
+    (M - 1,) mm per block) over every block of the window (module docstring); NaN radius where an
+    end is unknown."""
+    m = len(body_ends)
+    # every window's ends, the next window's first included; past the last end, the last again
+    padded_ends = np.concatenate([body_ends, np.repeat(body_ends[-1:], count * WINDOW + 1 - m, axis=0)])
+    start = padded_ends[:-1:WINDOW]  # (count, 2, 3)
+    step = padded_ends[:-1].reshape(count, WINDOW, 2, 3) - start[:, None]
+    last = padded_ends[WINDOW::WINDOW] - start
+    shift = np.sqrt(np.maximum(np.einsum("wkei,wkei->wke", step, step).max(axis=(1, 2)),
+                               np.einsum("wei,wei->we", last, last).max(axis=1)))
+    padded_r = np.r_[radius, np.repeat(radius[-1:], count * WINDOW + 1 - m)]
+    widest = np.maximum(padded_r[:-1].reshape(count, WINDOW).max(axis=1), padded_r[WINDOW::WINDOW])
+    padded_move = np.r_[move, np.zeros(count * WINDOW - len(move))].reshape(count, WINDOW)
+    return Capsules(start[:, 0], start[:, 1], widest + shift + 0.5 * padded_move.max(axis=1))
 
 
 def _pair_bodies(pair: Pair, ends: Samples, index: np.ndarray) -> tuple[Convex, Convex]:
@@ -185,61 +331,88 @@ def _distance(pair: Pair, ends: Samples, index: np.ndarray, need: float) -> np.n
     return distance(*_pair_bodies(pair, ends, index), need + 1.0)
 
 
-def _bisect(joints: np.ndarray, place: Callable[[np.ndarray, np.ndarray, np.ndarray], Samples], tool: np.ndarray,
-            pair: Pair, blocks: np.ndarray, exact: np.ndarray, margin: float, smallest: np.ndarray
-            ) -> list[Contact]:
-    """Bisect the stretches of ``blocks`` (block k + 1 runs from end k to end k + 1) whose bound is
-    under the margin: the least bound per block under the margin, as contacts."""
+def _refine(joints: np.ndarray, place: Place, tool: np.ndarray,
+            pair: Pair, blocks: np.ndarray, exact: np.ndarray, margin: float, smallest: np.ndarray,
+            alpha: np.ndarray) -> list[Contact]:
+    """Split the stretches of ``blocks`` (block k + 1 runs from end k to end k + 1) whose bound is
+    under the margin until it clears (module docstring): the least bound per block under the
+    margin, as contacts. A stretch is cut into as many equal pieces as its bound asks for (m over
+    n pieces against its ends' room above the margin; at most MAX_PIECES, at least two), not
+    halved level by level. ``alpha`` (M,) rad: the platform's tilt at the block ends (the samples'
+    warm start)."""
     q0, q1 = joints[blocks], joints[blocks + 1]
+    alpha0, alpha1 = np.nan_to_num(alpha[blocks]), np.nan_to_num(alpha[blocks + 1])
+    moving = [pair.moving] if pair.fixed is not None else [pair.moving, pair.other]
+    names = frozenset(moving)
     t0, t1 = np.zeros(len(blocks)), np.ones(len(blocks))
     d0, d1 = exact[blocks], exact[blocks + 1]
     owner = np.arange(len(blocks))
-    e0 = place(q0, tool[blocks + 1], None)
-    e1 = place(q1, tool[blocks + 1], None)
-    a0, a1 = e0.bodies[pair.moving], e1.bodies[pair.moving]
-    r = e0.radius[pair.moving]
-    b0 = e0.bodies.get(pair.other) if pair.fixed is None else None
-    b1 = e1.bodies.get(pair.other) if pair.fixed is None else None
-    rb = e0.radius.get(pair.other) if pair.fixed is None else None
+    e0 = place(q0, tool[blocks + 1], alpha0, names)
+    e1 = place(q1, tool[blocks + 1], alpha1, names)
+    qa, qb = q0, q1  # each stretch's joints at its two samples
+    lever_a = {name: e0.levers[name] for name in moving}
+    lever_b = {name: e1.levers[name] for name in moving}
     best = np.minimum(d0, d1)  # sampled clearances are true lower bounds where they were taken
     where = np.where(d0 <= d1, 0.0, 1.0)
     for level in range(MAX_LEVELS + 1):
-        move = _motion(a0, a1, r) + (0.0 if b0 is None else _motion(b0, b1, rb))
+        move = sum(_motion(qa, qb, lever_a[name], lever_b[name]) for name in moving)
         lb = 0.5 * (d0 + d1 - move)
         # Branch and bound on the block's least clearance: a stretch whose bound is not below the
-        # least sampled clearance so far (a collision found: 0) cannot hold a smaller one.
+        # least sampled clearance so far (a collision found: 0) cannot hold a smaller one; but a
+        # bound at 0 is no collision while the samples are clear, so it is cut on to RESOLUTION.
         # A block whose bodies were found to meet (0, the least there is) is settled.
-        split = ((lb < margin) & (lb < best[owner] - RESOLUTION) & (best[owner] > 0.0) & (move > RESOLUTION)
-                 & (level < MAX_LEVELS))
-        stop = np.flatnonzero((lb < margin) & ~split)  # resolved: its bound is the clearance there
-        low = np.maximum(lb[stop], 0.0)
+        split = ((lb < margin) & ((lb < best[owner] - RESOLUTION) | (lb <= 0.0)) & (best[owner] > 0.0)
+                 & (move > RESOLUTION) & (level < MAX_LEVELS))
+        stop = np.flatnonzero(~split)  # resolved: its bound is the least clearance there
+        low = np.maximum(np.nan_to_num(lb[stop], nan=np.inf), 0.0)
         better = low < best[owner[stop]]
         best[owner[stop[better]]] = low[better]
         where[owner[stop[better]]] = 0.5 * (t0[stop[better]] + t1[stop[better]])
         s = np.flatnonzero(split)
         if not s.size:
             break
-        tm = 0.5 * (t0[s] + t1[s])
-        qm = q0[owner[s]] + tm[:, None] * (q1[owner[s]] - q0[owner[s]])
-        em = place(qm, tool[blocks[owner[s]] + 1], None)
+        # n pieces of m / n each clear the margin if the ends' clearances hold along the stretch
+        room = d0[s] + d1[s] - 2.0 * margin
+        with np.errstate(divide="ignore", invalid="ignore"):
+            wanted = np.where(room > 0.0, np.ceil(move[s] / room), 2.0)
+        pieces = np.clip(np.nan_to_num(wanted, nan=2.0, posinf=MAX_PIECES), 2, MAX_PIECES).astype(int)
+        parent = np.repeat(s, pieces - 1)  # a new sample inside stretch s, at share j / n of it
+        j = np.arange(len(parent)) - np.repeat(np.cumsum(pieces - 1) - (pieces - 1), pieces - 1) + 1
+        tm = t0[parent] + (t1[parent] - t0[parent]) * j / np.repeat(pieces, pieces - 1)
+        block = owner[parent]
+        qm = q0[block] + tm[:, None] * (q1[block] - q0[block])
+        em = place(qm, tool[blocks[block] + 1], alpha0[block] + tm * (alpha1[block] - alpha0[block]), names)
         am, ram = em.bodies[pair.moving], em.radius[pair.moving]
         if pair.fixed is None:
             bm, rbm = em.bodies[pair.other], em.radius[pair.other]
             dm = distance(_body(Capsules, am, ram), _body(Capsules, bm, rbm), margin + 1.0)
         else:
-            dm = distance(_body(pair.kind, am, ram), rows(pair.fixed, np.zeros(len(s), int)), margin + 1.0)
+            dm = distance(_body(pair.kind, am, ram), rows(pair.fixed, np.zeros(len(parent), int)), margin + 1.0)
         dm = np.where(np.isfinite(am).all(axis=(1, 2)), dm, np.inf)
-        upd = dm < best[owner[s]]
-        best[owner[s][upd]] = dm[upd]
-        where[owner[s][upd]] = tm[upd]
-        owner = np.r_[owner[s], owner[s]]
-        t0, t1 = np.r_[t0[s], tm], np.r_[tm, t1[s]]
-        d0, d1 = np.r_[d0[s], dm], np.r_[dm, d1[s]]
-        a0, a1 = np.r_[a0[s], am], np.r_[am, a1[s]]
-        r = np.r_[r[s], ram]
-        if b0 is not None:
-            b0, b1 = np.r_[b0[s], bm], np.r_[bm, b1[s]]
-            rb = np.r_[rb[s], rbm]
+        lowest = np.full(len(blocks), np.inf)
+        np.minimum.at(lowest, block, dm)
+        found = np.flatnonzero(lowest < best)
+        best[found] = lowest[found]
+        first = dm == lowest[block]
+        where[block[first]] = tm[first]  # a block's least sample (ties: the last)
+        # the pieces of each split stretch: from its start through its new samples to its end
+        starts = np.cumsum(pieces) - pieces  # each split stretch's first piece among the new ones
+        inner = np.arange(len(parent)) + np.repeat(np.arange(len(s)), pieces - 1) + 1  # new samples' pieces
+        count = int(pieces.sum())
+        new_t0, new_t1, new_d0, new_d1 = (np.empty(count) for _ in range(4))
+        new_qa, new_qb = np.empty((count, 5)), np.empty((count, 5))
+        new_la = {name: np.empty((count, 3)) for name in moving}
+        new_lb = {name: np.empty((count, 3)) for name in moving}
+        last = starts + pieces - 1
+        new_t0[starts], new_d0[starts], new_qa[starts] = t0[s], d0[s], qa[s]
+        new_t1[last], new_d1[last], new_qb[last] = t1[s], d1[s], qb[s]
+        new_t0[inner], new_d0[inner], new_qa[inner] = tm, dm, qm
+        new_t1[inner - 1], new_d1[inner - 1], new_qb[inner - 1] = tm, dm, qm
+        for name in moving:
+            new_la[name][starts], new_lb[name][last] = lever_a[name][s], lever_b[name][s]
+            new_la[name][inner], new_lb[name][inner - 1] = em.levers[name], em.levers[name]
+        owner = np.repeat(owner[s], pieces)
+        t0, t1, d0, d1, qa, qb, lever_a, lever_b = new_t0, new_t1, new_d0, new_d1, new_qa, new_qb, new_la, new_lb
     np.minimum.at(smallest, blocks + 1, best)
     return [Contact(int(blocks[k] + 1), float(where[k]), pair.moving, pair.other, float(best[k]))
             for k in np.flatnonzero(best < margin)]

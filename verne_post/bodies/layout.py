@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kinematics.geometry import Geometry
+from ..kinematics.jacobian import closure_inverse
 from .config import BodiesConfig
-from .convex import Boxes, Capsules, Cylinders
+from .convex import Capsules
 
 
 @dataclass(frozen=True)
@@ -97,12 +98,12 @@ def to_cradle(points: np.ndarray, theta2: np.ndarray) -> np.ndarray:
 class Placed:
     """The moving bodies of N joint sets. ``head``: the stack's cylinders in the table frame (N,
     H, 2, 3) axis end points; ``links``: the rods and the platform as capsules in the base frame
-    (N, 5, 2, 3) (leg I's two rods, legs II and III, the platform); both also in the table frame
-    for the table-side checks, and the rotation (table to base) and origin of each table frame."""
+    (N, 5, 2, 3) (leg I's two rods, legs II and III, the platform); the platform also in the table
+    frame, for the table-side checks; ``theta2`` the table's true turn."""
 
     head: np.ndarray  # (N, H, 2, 3) table frame
     links: np.ndarray  # (N, 5, 2, 3) base frame
-    links_table: np.ndarray  # (N, 5, 2, 3) table frame
+    platform_table: np.ndarray  # (N, 2, 3) the platform (the last link) in the table frame
     theta2: np.ndarray  # (N,) rad, true
 
 
@@ -128,63 +129,70 @@ def guideways(bodies: BodiesConfig, geometry: Geometry) -> Capsules:
                     np.full(3, 0.5 * g.diameter))
 
 
-def place(bodies: BodiesConfig, geometry: Geometry, joints: np.ndarray, platform: np.ndarray,
-          alpha: np.ndarray, delta: np.ndarray, stack_start: np.ndarray, stack_end: np.ndarray) -> Placed:
-    """The moving bodies at N joint sets: ``joints`` (N, 5) true joints (mm, rad), ``platform``
-    (N, 3) P in the base frame (mm), ``alpha`` (N,) rad, ``delta`` (N,) P to tool tip (mm),
-    ``stack_start``/``stack_end`` (N, H) the head bodies' spans from the tip (mm, :class:`Stack`;
-    rows of one H). ``geometry``: the kinematics' record."""
+def place_links(bodies: BodiesConfig, geometry: Geometry, rho: np.ndarray, platform: np.ndarray,
+                alpha: np.ndarray) -> np.ndarray:
+    """(N, 5, 2, 3) mm, base frame: :data:`LINK_NAMES` as capsules' axis end points at N joint sets:
+    ``rho`` (N, 3) true slider positions (mm), ``platform`` (N, 3) P (mm), ``alpha`` (N,) rad.
+    A rod's capsule ends at its two joints' centres: its axis stops its radius short of each, so
+    its round ends reach the centres and no further (beyond them is the joint's housing, on the
+    slider or the platform; a full-length capsule would bulge into the neighbouring leg's joint,
+    5.35 mm from leg I's at the default geometry, and meet it within the margin)."""
     g, p = geometry, bodies.platform
     ca, sa = np.cos(alpha), np.sin(alpha)
-    ey = np.column_stack([np.zeros_like(ca), ca, sa])  # Rot(x, alpha) e_y, e_z
-    ez = np.column_stack([np.zeros_like(ca), -sa, ca])
+    ey = np.column_stack([np.zeros_like(ca), ca, sa])  # Rot(x, alpha) e_y
     ex = np.array([1.0, 0.0, 0.0])
 
     def on_platform(x: float, y: float) -> np.ndarray:
         return platform + x * ex + y * ey
 
     d1, d2 = p.D1 - g.D1_minus_d1, p.D2 - g.D2_minus_d2
-    rho = joints[:, :3]
-    one = np.ones(len(joints))
+    one = np.ones(len(rho))
 
     def on_slider(x: float, y: float, k: int) -> np.ndarray:
         return np.column_stack([x * one, y * one, rho[:, k]])
 
-    links = np.stack([
+    joints = np.stack([
         np.stack([on_slider(d1, g.r1, 0), on_platform(p.D1, g.R1)], 1),
         np.stack([on_slider(d1, -g.r1, 0), on_platform(p.D1, -g.R1)], 1),
         np.stack([on_slider(d2, -g.r4, 1), on_platform(p.D2, -g.R2)], 1),
         np.stack([on_slider(d2, g.r4, 2), on_platform(p.D2, g.R2)], 1),
-        np.stack([on_platform(0.5 * (p.D1 + p.D2), -max(g.R1, g.R2)),
-                  on_platform(0.5 * (p.D1 + p.D2), max(g.R1, g.R2))], 1),
-    ], 1)
+    ], 1)  # (N, 4, 2, 3) the rods' joint centres
+    span = joints[:, :, 1] - joints[:, :, 0]
+    inset = (link_radii(bodies)[:4] / np.linalg.norm(span, axis=2))[..., None] * span
+    rods = np.stack([joints[:, :, 0] + inset, joints[:, :, 1] - inset], 2)
+    platform_link = np.stack([on_platform(0.5 * (p.D1 + p.D2), -max(g.R1, g.R2)),
+                              on_platform(0.5 * (p.D1 + p.D2), max(g.R1, g.R2))], 1)
+    return np.concatenate([rods, platform_link[:, None]], 1)
+
+
+def platform_speeds(geometry: Geometry, rho: np.ndarray, platform: np.ndarray, alpha: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(N,), (N,): the Frobenius norm of dP/drho (mm/mm) and the norm of d alpha/drho (rad/mm), the
+    module's Jacobian from its closure equations (:func:`verne_post.kinematics.jacobian.closure_inverse`),
+    at slider readings ``rho`` (N, 3) mm with their platform P (N, 3) mm (base frame) and tilt
+    ``alpha`` (N,) rad; NaN where unknown. For every slider step d (mm), |dP| <= the first times |d|
+    and |d alpha| <= the second times |d|."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        jacobian = closure_inverse(geometry, platform, alpha, rho)[1]  # (4, 3, N); NaN rows stay NaN
+    speed_p = np.sqrt(np.einsum("ijn,ijn->n", jacobian[:3], jacobian[:3]))
+    return speed_p, np.sqrt(np.einsum("jn,jn->n", jacobian[3], jacobian[3]))
+
+
+def place(bodies: BodiesConfig, geometry: Geometry, joints: np.ndarray, platform: np.ndarray,
+          alpha: np.ndarray, delta: np.ndarray, stack_start: np.ndarray, stack_end: np.ndarray,
+          links: np.ndarray | None = None) -> Placed:
+    """The moving bodies at N joint sets: ``joints`` (N, 5) true joints (mm, rad), ``platform``
+    (N, 3) P in the base frame (mm), ``alpha`` (N,) rad, ``delta`` (N,) P to tool tip (mm),
+    ``stack_start``/``stack_end`` (N, H) the head bodies' spans from the tip (mm, :class:`Stack`;
+    rows of one H); ``links``: :func:`place_links` if already known. ``geometry``: the kinematics'
+    record."""
+    g = geometry
+    links = place_links(bodies, g, joints[:, :3], platform, alpha) if links is None else links
+    ez = np.column_stack([np.zeros_like(alpha), -np.sin(alpha), np.cos(alpha)])  # Rot(x, alpha) e_z
     rotation = table_rotation(joints[:, 3], joints[:, 4])
     origin = table_origin(g.da, g.dt, joints[:, 3])
     tip_base = platform + delta[:, None] * ez
     tip = to_table(tip_base, rotation, origin)
     axis = -np.einsum("nji,nj->ni", rotation, ez)  # from the tip toward the spindle
     head = tip[:, None, None] + np.stack([stack_start, stack_end], -1)[..., None] * axis[:, None, None]
-    links_table = to_table(links.reshape(len(joints), -1, 3), rotation, origin).reshape(links.shape)
-    return Placed(head, links, links_table, joints[:, 4])
-
-
-def head_cylinders(placed: Placed, radius: np.ndarray, rows: np.ndarray, body: np.ndarray,
-                   cradle: bool = False) -> Cylinders:
-    """The head bodies ``body`` of joint sets ``rows`` (table frame, or the cradle frame)."""
-    ends = placed.head[rows, body]
-    if cradle:
-        ends = to_cradle(ends, placed.theta2[rows])
-    return Cylinders(ends[:, 0], ends[:, 1], radius[rows, body])
-
-
-def link_capsules(placed: Placed, radii: np.ndarray, rows: np.ndarray, body: np.ndarray,
-                  frame: str = "base") -> Capsules:
-    """Links ``body`` of joint sets ``rows`` in the base, table or cradle frame."""
-    ends = placed.links[rows, body] if frame == "base" else placed.links_table[rows, body]
-    if frame == "cradle":
-        ends = to_cradle(ends, placed.theta2[rows])
-    return Capsules(ends[:, 0], ends[:, 1], radii[body])
-
-
-def fixed_boxes(lo: np.ndarray, hi: np.ndarray, count: int) -> Boxes:
-    return Boxes(np.broadcast_to(lo, (count, 3)), np.broadcast_to(hi, (count, 3)))
+    return Placed(head, links, to_table(links[:, 4], rotation, origin), joints[:, 4])

@@ -18,10 +18,21 @@ import numpy as np
 
 from ..kinematics import Geometry
 from ..kinematics.module import module_fk_working
-from .clearance import ClearanceResult, Contact, Pair, Samples, clear_motion
+from .clearance import K_J, ClearanceResult, Contact, Pair, Samples, clear_motion
 from .config import BodiesConfig
 from .convex import Boxes, Capsules, Cylinders
-from .layout import GUIDEWAY_NAMES, LINK_NAMES, Stack, guideways, link_radii, place, to_cradle, tool_stack
+from .layout import (
+    GUIDEWAY_NAMES,
+    LINK_NAMES,
+    Stack,
+    guideways,
+    link_radii,
+    place,
+    place_links,
+    platform_speeds,
+    to_cradle,
+    tool_stack,
+)
 from .setup import Setup
 
 #: Links that meet each guideway at a joint (their own slider): never checked against it.
@@ -62,42 +73,87 @@ class World:
         return start, end, radius, present
 
     def obstacles(self) -> list[tuple[str, str, Boxes | Cylinders]]:
-        """The fixed bodies on the table side: (name, frame, one-row shape); table-frame ones and
-        the cradle's boxes in the cradle frame."""
+        """The fixed bodies on the table side: (name, frame, one-row shape); the setup in the table
+        frame, the cradle's boxes in the cradle frame, and the table too: it turns about its own
+        axis, so it is the same cylinder there, and a program without a setup needs the moving
+        bodies in one frame only."""
         t = self.bodies.table
         out: list[tuple[str, str, Boxes | Cylinders]] = [
-            ("table", "table", Cylinders(np.array([[0.0, 0.0, t.top - t.thickness]]), np.array([[0.0, 0.0, t.top]]),
+            ("table", "cradle", Cylinders(np.array([[0.0, 0.0, t.top - t.thickness]]), np.array([[0.0, 0.0, t.top]]),
                                          np.array([0.5 * t.diameter])))]
         out += [(b.name, "cradle", Boxes(np.array([b.lo]), np.array([b.hi]))) for b in self.bodies.cradle]
         out += [(b.name, "table", b.shape(self.offset)) for b in self.setup.bodies]
         return out
 
     def sampler(self):
-        """``place(joints, stack, guess) -> Samples`` for :func:`clear_motion`: every moving body in
-        the frames its pairs are checked in."""
+        """``place(joints, stack, guess, names=None) -> Samples`` for :func:`clear_motion`: the
+        moving bodies ``names`` (None: all) in the frames their pairs are checked in."""
         start, end, radius, _ = self._spans()
         lengths = np.array([s.start[-1] for s in self.stacks])  # the spindle starts at the nose
         g, slots = self.geometry, self.slots
         radii = link_radii(self.bodies)
+        # the rods' platform ends' and the platform's ends' distances from its tilt axis (mm)
+        rod_levers = (g.R1, g.R1, g.R2, g.R2)
+        platform_half = max(g.R1, g.R2)
+        table_side = frozenset(f"{name}@{frame}" for name in (*slots, "platform") for frame in ("table", "cradle"))
 
-        def sample(joints: np.ndarray, stack: np.ndarray, guess: np.ndarray | None) -> Samples:
+        def sample(joints: np.ndarray, stack: np.ndarray, guess: np.ndarray | None,
+                   names: frozenset[str] | None = None) -> Samples:
+            def wanted(key: str) -> bool:
+                return names is None or key in names
+
             true = g.true_joints(joints)
             module = module_fk_working(g, joints[:, :3], guess)
-            placed = place(self.bodies, g, true, module.platform, module.alpha,
-                           g.spindle_nose + lengths[stack], start[stack], end[stack])
+            speed_p, speed_alpha = platform_speeds(g, joints[:, :3], module.platform, module.alpha)
+            speed_p, speed_alpha = K_J * speed_p, K_J * speed_alpha
             bodies: dict[str, np.ndarray] = {}
             rad: dict[str, np.ndarray] = {}
-            cradle_head = to_cradle(placed.head.reshape(len(true), -1, 3), placed.theta2).reshape(placed.head.shape)
+            levers: dict[str, np.ndarray] = {}
+            zero = np.zeros(len(true))
+            links = place_links(self.bodies, g, true[:, :3], module.platform, module.alpha)
+            for k, name in enumerate(LINK_NAMES[:4]):
+                key = f"{name}@base"
+                if not wanted(key):
+                    continue
+                # a rod: its slider end moves at most the sliders' step, its platform end with the
+                # platform (both joints' centres: its body ends within them); its radius turns with
+                # its axis, at most the two ends' speeds over the joints' distance
+                rod = links[:, k]
+                platform_end = speed_p + speed_alpha * rod_levers[k]
+                length = np.linalg.norm(rod[:, 1] - rod[:, 0], axis=1) + 2.0 * radii[k]
+                bodies[key], rad[key] = rod, np.full(len(true), radii[k])
+                levers[key] = np.column_stack([np.maximum(1.0, platform_end) + radii[k] * (1.0 + platform_end) / length,
+                                               zero, zero])
+            if names is not None and not names & table_side:  # the rods alone: no table side to place
+                return Samples(bodies, rad, module.alpha, levers)
+            delta = g.spindle_nose + lengths[stack]
+            placed = place(self.bodies, g, true, module.platform, module.alpha, delta, start[stack], end[stack], links)
+            ez = np.column_stack([zero, -np.sin(module.alpha), np.cos(module.alpha)])
+            in_table = [wanted(f"{name}@table") for name in slots]
+            in_cradle = [wanted(f"{name}@cradle") for name in slots]
             for k, name in enumerate(slots):
-                bodies[f"{name}@table"], bodies[f"{name}@cradle"] = placed.head[:, k], cradle_head[:, k]
-                rad[f"{name}@table"] = rad[f"{name}@cradle"] = radius[stack, k]
-            platform_cradle = to_cradle(placed.links_table[:, 4], placed.theta2)
-            bodies["platform@table"], bodies["platform@cradle"] = placed.links_table[:, 4], platform_cradle
-            rad["platform@table"] = rad["platform@cradle"] = np.full(len(true), radii[4])
-            for k, name in enumerate(LINK_NAMES):
-                bodies[f"{name}@base"] = placed.links[:, k]
-                rad[f"{name}@base"] = np.full(len(true), radii[k])
-            return Samples(bodies, rad)
+                if not (in_table[k] or in_cradle[k]):
+                    continue
+                r = radius[stack, k]
+                spans = np.stack([delta - start[stack, k], delta - end[stack, k]], 1)  # from P along ez
+                head_base = module.platform[:, None] + spans[..., None] * ez[:, None]
+                lever = np.column_stack([speed_p + speed_alpha * (np.abs(spans).max(axis=1) + r),
+                                         _from_cradle_axis(head_base, g.da) + r,
+                                         _from_table_axis(placed.head[:, k]) + r])
+                if in_table[k]:
+                    bodies[f"{name}@table"], rad[f"{name}@table"], levers[f"{name}@table"] = placed.head[:, k], r, lever
+                if in_cradle[k]:
+                    bodies[f"{name}@cradle"] = to_cradle(placed.head[:, k], placed.theta2)
+                    rad[f"{name}@cradle"], levers[f"{name}@cradle"] = r, lever * [1.0, 1.0, 0.0]
+            r = radii[4]
+            lever = np.column_stack([speed_p + speed_alpha * (platform_half + r),
+                                     _from_cradle_axis(links[:, 4], g.da) + r,
+                                     _from_table_axis(placed.platform_table) + r])
+            bodies["platform@table"], bodies["platform@cradle"] = (placed.platform_table,
+                                                                   to_cradle(placed.platform_table, placed.theta2))
+            rad["platform@table"] = rad["platform@cradle"] = np.full(len(true), r)
+            levers["platform@table"], levers["platform@cradle"] = lever, lever * [1.0, 1.0, 0.0]
+            return Samples(bodies, rad, module.alpha, levers)
 
         return sample
 
@@ -124,12 +180,23 @@ class World:
         return pairs
 
     def clearance(self, joints: np.ndarray, stack: np.ndarray, cut: np.ndarray,
-                  first_collision: bool = False) -> ClearanceResult:
+                  first_collision: bool = False, alpha_guess: np.ndarray | None = None) -> ClearanceResult:
         """The clearance along block ends ``joints`` (M, 5) readings (mm, rad) with tool stacks
         ``stack`` (M,) and ``cut`` (M,) (a feed block: the cutter may touch the stock); see
-        :func:`clear_motion` for ``first_collision``."""
+        :func:`clear_motion` for ``first_collision`` and ``alpha_guess``."""
         return clear_motion(joints, self.sampler(), stack, self.pairs(stack, cut), self.bodies.margin,
-                            first_collision=first_collision)
+                            first_collision=first_collision, alpha_guess=alpha_guess)
+
+
+def _from_cradle_axis(ends: np.ndarray, da: float) -> np.ndarray:
+    """(N,) mm: the larger distance of two base-frame axis end points (N, 2, 3) from the cradle's
+    axis (x through (0, 0, da))."""
+    return np.hypot(ends[..., 1], ends[..., 2] - da).max(axis=1)
+
+
+def _from_table_axis(ends: np.ndarray) -> np.ndarray:
+    """(N,) mm: the larger distance of two table-frame axis end points (N, 2, 3) from the table's axis."""
+    return np.hypot(ends[..., 0], ends[..., 1]).max(axis=1)
 
 
 def plain(name: str) -> str:

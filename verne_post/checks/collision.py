@@ -77,19 +77,21 @@ class Collisions:
 
 def check_collisions(machine: Machine, poses: MachinePoses, joints: np.ndarray, pose: np.ndarray,
                      rapid: np.ndarray, tip: np.ndarray, world: World | None = None,
-                     first_collision: bool = False) -> Collisions:
+                     first_collision: bool = False, alpha: np.ndarray | None = None) -> Collisions:
     """The collisions along block ends ``joints`` (M, 5) readings (mm, rad) of CL poses ``pose``
     (M,) (indices of ``poses``), ``rapid`` (M,) per block (a move between cuts: the cutter is
     checked against the stock too, see :func:`verne_post.bodies.world.cutting`), ``tip`` (M, 3) the block ends' tool
     tips (mm, table frame). Block k runs from end k - 1 to end k. With ``first_collision`` the
-    search stops at the first pair that meets (placement's room asks only whether it runs)."""
+    search stops at the first pair that meets (placement's room asks only whether it runs). ``alpha``
+    (M,) rad: the platform's tilt at the block ends, as the inverse kinematics found it (the forward
+    kinematics' warm start; it still solves and checks every end)."""
     if not machine.bodies.check or not len(joints):
         return Collisions([], [], None)
     world = world_of(machine, poses) if world is None else world
     stack = tool_use_of_poses(poses)[pose]
     radius = max(float(s.radius[0]) for s in world.stacks)
     result = world.clearance(placeable(machine, joints), stack, cutting(poses.setup, tip, rapid, radius),
-                             first_collision)
+                             first_collision, alpha)
     violations: list[Violation] = []
     warnings: list[str] = []
     for line, a, b, clearance in least_contacts(result.contacts, poses.line[pose])[:MAX_REPORTED]:

@@ -52,7 +52,7 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     others += between_violations(poses, between.problems)
     if collisions and not (first_failure and (checks or others)):
         others += check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip,
-                                   first_collision=first_failure).violations
+                                   first_collision=first_failure, alpha=blocks.result.alpha).violations
     return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
 
 

@@ -198,7 +198,7 @@ def verify_blocks(program: GcodeProgram, machine: Machine, reference: Reference 
     speed_ratio = joint_speed(program, machine, findings)
     if bodies is not None:
         findings += collision_findings(program, machine, bodies, lengths, motion.ends.tip,
-                                       np.asarray(tuple(work_offset), dtype=float))
+                                       np.asarray(tuple(work_offset), dtype=float), motion.ends.alpha)
     tip_dev = axis_dev = feed_ratio = peak_ratio = None
     reached = None
     rapid_dev: float | None
