@@ -191,3 +191,24 @@ def test_a_coordinate_kilometres_away_is_a_limit_violation_not_bodies_bisected(t
     joints = np.array([inside, inside - [3000.0, 0, 0, 0, 0], inside - [1000.0, 0, 0, 0, 0]])
     placed = placeable(machine, joints)
     assert np.isnan(placed[1]).all() and np.array_equal(placed[[0, 2]], joints[[0, 2]])
+
+
+def test_a_block_that_turns_the_endless_table_a_million_turns_is_refused_in_one_line(tmp_path: Path) -> None:
+    """C has no travel limit, so a corrupt C word (1e12 deg) is no limit violation; its block
+    cannot be checked for bodies (it would be cut into 10^10 stretches): verify names the line and
+    why in one finding, exit 3, instead of running out of memory (it tried 520 GiB before)."""
+    x = np.linspace(-40.0, 40.0, 17)
+    code, output, out = _run(tmp_path, _cl(_line_cut(x, 0.0)), "--work-offset", "0", "0", "200")
+    assert code == 0, output
+    lines = out.read_text().splitlines()
+    moves = [k for k, line in enumerate(lines) if re.match(r"G1 .*C-?[\d.]+", line)]
+    target = moves[len(moves) // 2]
+    lines[target] = re.sub(r"C-?[\d.]+", "C1000000000000.0", lines[target])
+    corrupt = tmp_path / "corrupt.nc"
+    corrupt.write_text("\n".join(lines) + "\n")
+    result = CliRunner().invoke(main, ["verify", str(corrupt)])
+    assert result.exit_code == 3, result.output
+    # the block into the corrupt end, or the one out of it (both turn the table as far)
+    found = re.search(r"corrupt\.nc:(\d+): the block moves the sliders", result.output)
+    assert found and int(found.group(1)) in (target + 1, target + 2), result.output
+    assert "too far to check the bodies along it" in result.output and "Traceback" not in result.output

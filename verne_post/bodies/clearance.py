@@ -63,6 +63,9 @@ K_J = 1.25
 #: mm, rad: a longer stretch (slider steps' norm, both turns together) is split before a bound is taken.
 MAX_SLIDER_STEP = 100.0
 MAX_TURN = 0.5
+#: A block that would need more stretches is not checked (:class:`MotionTooLongError`): 1 km of slider
+#: or 800 turns of the table in one block.
+MAX_BLOCK_PIECES = 10_000
 #: mm: a stretch whose bound is less is not cut further; rounds of cutting at most.
 RESOLUTION = 0.05
 MAX_LEVELS = 18
@@ -259,15 +262,32 @@ def clear_motion(joints: np.ndarray, place: Place,
     return ClearanceResult(tuple(contacts), smallest, cap)
 
 
+class MotionTooLongError(ValueError):
+    """A block moves too far for its bodies to be checked along it (an endless table turned
+    hundreds of times in one block): ``block`` its index; the message says how far, in mm and
+    degrees."""
+
+    def __init__(self, block: int, slider: float, turn: float) -> None:
+        super().__init__(f"the block moves the sliders {slider:.0f} mm and turns the table {np.degrees(turn):.0f} deg: "
+                         f"too far to check the bodies along it (at most {MAX_BLOCK_PIECES * MAX_SLIDER_STEP:.0f} mm "
+                         f"or {np.degrees(MAX_BLOCK_PIECES * MAX_TURN):.0f} deg a block); split the move")
+        self.block = block
+
+
 def _pieces(joints: np.ndarray) -> np.ndarray:
     """(M,) the equal stretches each block is cut into so that none is too long for the bound
-    (block 0, the positioning, and blocks with an unknown end: 1)."""
+    (block 0, the positioning, and blocks with an unknown end: 1). Raises :class:`MotionTooLongError`
+    for a block that would need more than MAX_BLOCK_PIECES."""
     step = np.abs(np.diff(joints, axis=0))
     need = np.maximum(np.sqrt(np.einsum("ij,ij->i", step[:, :3], step[:, :3])) / MAX_SLIDER_STEP,
                       (step[:, 3] + step[:, 4]) / MAX_TURN)
     with np.errstate(invalid="ignore"):
         count = np.where(np.isfinite(need) & (need > 1.0), np.ceil(need * (1.0 + 1e-9)), 1.0)
-    return np.r_[1, np.minimum(count, 1e6)].astype(int)
+    if np.any(count > MAX_BLOCK_PIECES):
+        worst = int(np.argmax(count))
+        raise MotionTooLongError(worst + 1, float(np.linalg.norm(step[worst, :3])),
+                                 float(step[worst, 3] + step[worst, 4]))
+    return np.r_[1, count].astype(int)
 
 
 def _in_pieces(joints: np.ndarray, pieces: np.ndarray, place: Place, tool: np.ndarray, pairs: list[Pair],
@@ -418,4 +438,4 @@ def _refine(joints: np.ndarray, place: Place, tool: np.ndarray,
             for k in np.flatnonzero(best < margin)]
 
 
-__all__ = ["Boxes", "ClearanceResult", "Contact", "Cylinders", "Pair", "Samples", "clear_motion"]
+__all__ = ["Boxes", "ClearanceResult", "Contact", "Cylinders", "MotionTooLongError", "Pair", "Samples", "clear_motion"]

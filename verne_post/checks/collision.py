@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..api import placeable
-from ..bodies.clearance import ClearanceResult
+from ..bodies.clearance import ClearanceResult, MotionTooLongError
 from ..bodies.layout import Stack, tool_stack
 from ..bodies.world import ProgramBodies, ToolShape, World, cutting, least_contacts
 from ..cl.toolpath import ToolChange
@@ -90,8 +90,11 @@ def check_collisions(machine: Machine, poses: MachinePoses, joints: np.ndarray, 
     world = world_of(machine, poses) if world is None else world
     stack = tool_use_of_poses(poses)[pose]
     radius = max(float(s.radius[0]) for s in world.stacks)
-    result = world.clearance(placeable(machine, joints), stack, cutting(poses.setup, tip, rapid, radius),
-                             first_collision, alpha)
+    try:
+        result = world.clearance(placeable(machine, joints), stack, cutting(poses.setup, tip, rapid, radius),
+                                 first_collision, alpha)
+    except MotionTooLongError as long:
+        return Collisions([Violation(int(poses.line[pose[long.block]]), "motion", str(long))], [], None)
     violations: list[Violation] = []
     warnings: list[str] = []
     for line, a, b, clearance in least_contacts(result.contacts, poses.line[pose])[:MAX_REPORTED]:

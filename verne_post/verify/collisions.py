@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..api import placeable
+from ..bodies.clearance import MotionTooLongError
 from ..bodies.world import ProgramBodies, cutting, least_contacts
 from ..machine import Machine
 from .gcode_reader import GcodeProgram
@@ -27,6 +28,9 @@ def collision_findings(program: GcodeProgram, machine: Machine, bodies: ProgramB
     world, stack = bodies.world(machine.bodies, machine.geom, program.tool, lengths, work_offset)
     radius = max(float(s.radius[0]) for s in world.stacks)
     cut = cutting(world.setup, tip, program.rapid, radius)
-    result = world.clearance(placeable(machine, program.joints), stack, cut, alpha_guess=alpha)
+    try:
+        result = world.clearance(placeable(machine, program.joints), stack, cut, alpha_guess=alpha)
+    except MotionTooLongError as long:
+        return [Finding(int(program.line[long.block]), "motion", str(long))]
     return [Finding(line, "collision", f"the {a} meets the {b} (clearance 0.000 mm)", value=0.0)
             for line, a, b, clearance in least_contacts(result.contacts, program.line) if clearance <= 0.0]
