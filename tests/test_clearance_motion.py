@@ -17,7 +17,7 @@ from tests.conftest import random_usable_joints
 from verne_post.bodies.clearance import MAX_SLIDER_STEP, MAX_TURN, WINDOW, _motion, clear_motion
 from verne_post.bodies.convex import Capsules, distance, rows
 from verne_post.bodies.setup import Setup, SetupBody
-from verne_post.bodies.world import ProgramBodies, ToolShape
+from verne_post.bodies.world import ProgramBodies, ToolShape, World
 
 TOOL_LENGTH = 100.0
 DENSE = 48  # samples per block
@@ -50,6 +50,16 @@ def _brute(sample, pair, joints: np.ndarray, stack: np.ndarray) -> np.ndarray:
     return least.reshape(len(joints) - 1, DENSE + 1).min(axis=1)
 
 
+def _beside_a_clamp(machine: vp.Machine, start: np.ndarray, gap: float, m: int) -> tuple[World, np.ndarray]:
+    """The bodies of a 100 mm tool (10 mm cutter) and a clamp ``gap`` mm beside the tip at joints
+    ``start`` (mm, rad), reaching above it; the world and the tool stacks of ``m`` block ends."""
+    tip = vp.forward_kinematics(machine, start[None], tool_length=TOOL_LENGTH).tip[0]
+    lo, hi = tip + np.array([gap, -15.0, -10.0]), tip + np.array([40.0, 15.0, 60.0])
+    clamp = SetupBody("clamp", "fixture", "box", tuple(lo), tuple(hi))
+    bodies = ProgramBodies(Setup((clamp,)), {1: ToolShape(diameter=10.0)})
+    return bodies.world(machine.bodies, machine.geom, np.ones(m), np.full(m, TOOL_LENGTH), np.zeros(3))
+
+
 def test_the_clearance_along_a_motion_never_exceeds_dense_sampling() -> None:
     machine = vp.load_machine()
     margin = machine.bodies.margin
@@ -58,14 +68,10 @@ def test_the_clearance_along_a_motion_never_exceeds_dense_sampling() -> None:
     compared = near = 0
     for start in starts:
         joints = _walk(start, 4 * WINDOW + 7, rng)
-        tip = vp.forward_kinematics(machine, start[None], tool_length=TOOL_LENGTH).tip[0]
         # a clamp 12 mm beside the tip at the start, reaching above it: the cutter, the shank and
         # the holder pass it at a few mm to tens of mm as the walk goes on
-        lo, hi = tip + np.array([12.0, -15.0, -10.0]), tip + np.array([40.0, 15.0, 60.0])
-        clamp = SetupBody("clamp", "fixture", "box", tuple(lo), tuple(hi))
-        bodies = ProgramBodies(Setup((clamp,)), {1: ToolShape(diameter=10.0)})
+        world, stack = _beside_a_clamp(machine, start, 12.0, len(joints))
         m = len(joints)
-        world, stack = bodies.world(machine.bodies, machine.geom, np.ones(m), np.full(m, TOOL_LENGTH), np.zeros(3))
         sample = world.sampler()
         for pair in world.pairs(stack, np.zeros(m, bool)):
             # one pair at a time: the least over the pairs would hide a pair's overstated bound
@@ -138,3 +144,37 @@ def test_no_body_point_moves_faster_than_the_bound() -> None:
             assert np.all(excess <= 1e-9), (kind, name, np.max(excess))
             checked += int(known.sum())
     assert checked > 0.9 * 4 * count * len(placed.bodies)
+
+
+def test_the_clearance_of_bodies_standing_still_is_every_pairs_least_distance() -> None:
+    """clear_at (placement's bodies screen) against each pair's distance at each joint set, measured
+    one pair at a time: the same under the margin (within the settling), at least the margin above."""
+    machine = vp.load_machine()
+    margin = machine.bodies.margin
+    rng = np.random.default_rng(8)
+    seen = meeting = 0
+    for start in random_usable_joints(machine, 3, seed=34, tool_length=TOOL_LENGTH):
+        joints = _walk(start, 200, rng)
+        world, stack = _beside_a_clamp(machine, start, 4.0, len(joints))
+        m = len(joints)
+        cut = rng.random(m) < 0.5  # the cutter against the stock is left out where it cuts
+        screened = world.clearance_at(joints, stack, cut)
+        placed = world.sampler()(joints, stack, None)
+        known = np.isfinite(placed.alpha)
+        least = np.full(m, np.inf)
+        for pair in world.pairs(stack, cut):
+            rows_ = np.flatnonzero(known & (True if pair.active is None else pair.active))
+            a = placed.bodies[pair.moving][rows_]
+            body_a = pair.kind(a[:, 0], a[:, 1], placed.radius[pair.moving][rows_])
+            if pair.fixed is None:
+                b = placed.bodies[pair.other][rows_]
+                body_b = Capsules(b[:, 0], b[:, 1], placed.radius[pair.other][rows_])
+            else:
+                body_b = rows(pair.fixed, np.zeros(len(rows_), int))
+            np.minimum.at(least, rows_, distance(body_a, body_b))
+        valid = known & np.isfinite(least)
+        assert np.allclose(np.minimum(screened[valid], margin), np.minimum(least[valid], margin), atol=SETTLED)
+        assert np.array_equal(screened[valid] <= 0.0, least[valid] <= 0.0)
+        seen += int(np.count_nonzero(valid & (least < margin)))
+        meeting += int(np.count_nonzero(valid & (least <= 0.0)))
+    assert seen > 20 and meeting > 5, (seen, meeting)

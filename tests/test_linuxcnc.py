@@ -397,3 +397,40 @@ def test_deviation_from_the_cl_path_and_time_per_block(run: SimulationResult, po
     assert "off the CL path" in result.output and "time per block" in result.output
     payload = json.loads(report.read_text())
     assert payload["cl_deviation_mm"]["feeds"] >= 0 and len(payload["blocks"]["line"]) > 5
+
+
+def test_the_distance_to_a_path_that_passes_one_point_many_times_is_found_among_all_its_passes() -> None:
+    """``_to_polyline`` against every segment by brute force, on paths like a CL file's passes:
+    many passes through one point (a plunge at the same place, pass after pass), each cut into
+    vertices at most ``spacing`` apart; points near that point, on and off the passes. (The nearest
+    four vertices were once all the shared point, of other passes, and a point on its own pass was
+    reported 0.084 mm away.)"""
+    from verne_post.linuxcnc.measures import _to_polyline
+
+    rng = np.random.default_rng(7)
+    spacing = 0.2
+    for _ in range(20):
+        hub = rng.uniform(-50, 50, 3)
+        passes = []
+        for _ in range(int(rng.integers(2, 12))):
+            direction = rng.normal(size=3)
+            far = hub + rng.uniform(1.0, 8.0) * direction / np.linalg.norm(direction)
+            source = hub + rng.uniform(0.5, 3.0) * np.r_[0.0, 0.0, 1.0]
+            for start, end in ((source, hub), (hub, far)):  # down onto the hub, then away
+                count = int(np.ceil(np.linalg.norm(end - start) / spacing))
+                passes.append(start + np.linspace(0.0, 1.0, count + 1)[1:, None] * (end - start))
+        vertices = np.vstack([hub[None], *passes])
+        joined = np.ones(len(vertices), bool)
+        starts = 1 + np.r_[0, np.cumsum([len(p) for p in passes])[:-1]]
+        joined[0] = False
+        joined[starts[0::2]] = False  # each pass starts anew above the hub: a rapid, not a segment
+        points = hub + rng.normal(scale=0.3, size=(400, 3))
+        points[:100] = vertices[rng.integers(0, len(vertices), 100)] + rng.normal(scale=1e-3, size=(100, 3))
+        a, b = vertices[:-1][joined[1:]], vertices[1:][joined[1:]]
+        ab = b - a
+        u = np.clip(np.einsum("sij,ij->si", points[:, None] - a[None], ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+        brute = np.linalg.norm(a[None] + u[..., None] * ab[None] - points[:, None], axis=2).min(axis=1)
+        lone = np.flatnonzero(~joined & ~np.r_[joined[1:], False])  # vertices joined to nothing count as points
+        if lone.size:
+            brute = np.minimum(brute, np.linalg.norm(points[:, None] - vertices[lone][None], axis=2).min(axis=1))
+        np.testing.assert_allclose(_to_polyline(points, vertices, joined, spacing), brute, atol=1e-9)

@@ -188,12 +188,6 @@ def clear_motion(joints: np.ndarray, place: Place,
             shapes[name] = (move, _windows(body_ends, r, move, windows))
         return shapes[name]
 
-    def sphere_of(name: str, kind: type, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A moving body's centres and bounding radii at the ends ``index``."""
-        body_ends, r = ends.bodies[name][index], ends.radius[name][index]
-        half = 0.5 * _norm(body_ends[:, 1] - body_ends[:, 0])
-        return 0.5 * (body_ends[:, 0] + body_ends[:, 1]), (half + r if kind is Capsules else np.hypot(half, r))
-
     # every pair's windows at once: pairs with a fixed body of one kind, and pairs of moving capsules
     window_clearance: dict[int, np.ndarray] = {}
     for kind in {type(pair.fixed) for pair in pairs}:
@@ -219,12 +213,7 @@ def clear_motion(joints: np.ndarray, place: Place,
         judged[0] |= not windows or not clear_window[0]
         sphere = np.full(m, np.inf)
         rows_ = np.flatnonzero(judged & known)
-        centre_a, reach_a = sphere_of(pair.moving, pair.kind, rows_)
-        if pair.fixed is not None:
-            centre_b, reach_b = pair.fixed.centre()[0], pair.fixed.reach()[0]
-        else:
-            centre_b, reach_b = sphere_of(pair.other, Capsules, rows_)
-        sphere[rows_] = np.maximum(_norm(centre_a - centre_b) - reach_a - reach_b, 0.0)
+        sphere[rows_] = _sphere_gap(pair, ends, rows_)
         # the slabs about the centres' direction and the bodies' faces: most pairs settle here
         rows_ = rows_[sphere[rows_] < margin + 1.0]
         if rows_.size:
@@ -260,6 +249,32 @@ def clear_motion(joints: np.ndarray, place: Place,
         if first_collision and any(c.clearance <= 0.0 for c in contacts):
             break
     return ClearanceResult(tuple(contacts), smallest, cap)
+
+
+def clear_at(joints: np.ndarray, place: Place, tool: np.ndarray, pairs: list[Pair], margin: float,
+             alpha_guess: np.ndarray | None = None) -> np.ndarray:
+    """(N,) mm: the least clearance over ``pairs`` of the bodies standing still at joint sets
+    ``joints`` (N, 5) (mm, rad; inf where unknown or out of reach) with tools ``tool`` (N,), a
+    pair's ``active`` per joint set. Exact (a certified lower bound) where under ``margin``, else
+    at least ``margin``.
+    No motion between them: a screen (placement's room), not a check of the blocks."""
+    known = np.all(np.isfinite(joints), axis=1)
+    moving = frozenset(name for pair in pairs for name in (pair.moving, pair.other if pair.fixed is None else ""))
+    ends = place(joints, tool, alpha_guess, moving)
+    least = np.full(len(joints), np.inf)
+    for pair in pairs:
+        index = np.flatnonzero(known if pair.active is None else known & pair.active)
+        if not index.size:
+            continue
+        found = _sphere_gap(pair, ends, index)
+        near = found < margin + 1.0
+        if near.any():
+            found[near] = np.maximum(found[near], quick_bound(*_pair_bodies(pair, ends, index[near])))
+        near = found < margin
+        if near.any():
+            found[near] = _distance(pair, ends, index[near], margin)
+        np.minimum.at(least, index, np.nan_to_num(found, nan=np.inf))  # NaN: the module's FK found no pose
+    return least
 
 
 class MotionTooLongError(ValueError):
@@ -336,6 +351,24 @@ def _windows(body_ends: np.ndarray, radius: np.ndarray, move: np.ndarray, count:
     widest = np.maximum(padded_r[:-1].reshape(count, WINDOW).max(axis=1), padded_r[WINDOW::WINDOW])
     padded_move = np.r_[move, np.zeros(count * WINDOW - len(move))].reshape(count, WINDOW)
     return Capsules(start[:, 0], start[:, 1], widest + shift + 0.5 * padded_move.max(axis=1))
+
+
+def _sphere_of(ends: Samples, name: str, kind: type, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A moving body's centres and bounding radii at the samples ``index``."""
+    body_ends, r = ends.bodies[name][index], ends.radius[name][index]
+    half = 0.5 * _norm(body_ends[:, 1] - body_ends[:, 0])
+    return 0.5 * (body_ends[:, 0] + body_ends[:, 1]), (half + r if kind is Capsules else np.hypot(half, r))
+
+
+def _sphere_gap(pair: Pair, ends: Samples, index: np.ndarray) -> np.ndarray:
+    """(len(index),) mm: the gap between the pair's bounding spheres at the samples ``index`` (a
+    lower bound of their clearance)."""
+    centre_a, reach_a = _sphere_of(ends, pair.moving, pair.kind, index)
+    if pair.fixed is not None:
+        centre_b, reach_b = pair.fixed.centre()[0], pair.fixed.reach()[0]
+    else:
+        centre_b, reach_b = _sphere_of(ends, pair.other, Capsules, index)
+    return np.maximum(_norm(centre_a - centre_b) - reach_a - reach_b, 0.0)
 
 
 def _pair_bodies(pair: Pair, ends: Samples, index: np.ndarray) -> tuple[Convex, Convex]:

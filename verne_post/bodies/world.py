@@ -18,7 +18,7 @@ import numpy as np
 
 from ..kinematics import Geometry
 from ..kinematics.module import module_fk_working
-from .clearance import K_J, ClearanceResult, Contact, Pair, Samples, clear_motion
+from .clearance import K_J, ClearanceResult, Contact, Pair, Samples, clear_at, clear_motion
 from .config import BodiesConfig
 from .convex import Boxes, Capsules, Cylinders
 from .layout import (
@@ -186,6 +186,13 @@ class World:
         :func:`clear_motion` for ``first_collision`` and ``alpha_guess``."""
         return clear_motion(joints, self.sampler(), stack, self.pairs(stack, cut), self.bodies.margin,
                             first_collision=first_collision, alpha_guess=alpha_guess)
+
+    def clearance_at(self, joints: np.ndarray, stack: np.ndarray, cut: np.ndarray,
+                     alpha_guess: np.ndarray | None = None) -> np.ndarray:
+        """(N,) mm: the least clearance of the bodies standing still at joint sets ``joints`` (N, 5)
+        (mm, rad) with tool stacks ``stack`` (N,) and ``cut`` (N,) (the cutter may touch the stock);
+        see :func:`clear_at`."""
+        return clear_at(joints, self.sampler(), stack, self.pairs(stack, cut), self.bodies.margin, alpha_guess)
 
 
 def _from_cradle_axis(ends: np.ndarray, da: float) -> np.ndarray:

@@ -30,6 +30,8 @@ class Checked:
     blocks: Blocks
     rapid: np.ndarray  # (M,) per block
     violations: tuple[Violation, ...]
+    #: (M,) mm: each block's least clearance between bodies (capped, far is far); None unchecked
+    clearance: np.ndarray | None = None
 
 
 def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
@@ -50,10 +52,13 @@ def check_poses(machine: Machine, poses: MachinePoses, options: PostOptions,
     rapid[0] = True  # where the machine stands before the program is unknown: position with G0
     checks, others = program_violations(machine, poses, options, solved.pair_switch, blocks, rapid)
     others += between_violations(poses, between.problems)
+    clearance = None
     if collisions and not (first_failure and (checks or others)):
-        others += check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip,
-                                   first_collision=first_failure, alpha=blocks.result.alpha).violations
-    return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))))
+        found = check_collisions(machine, poses, blocks.joints, blocks.pose, rapid, blocks.tip,
+                                 first_collision=first_failure, alpha=blocks.result.alpha)
+        others += found.violations
+        clearance = None if found.clearance is None else found.clearance.smallest
+    return Checked(solved, blocks, rapid, tuple(sorted(checks + others, key=lambda v: (v.line, v.kind))), clearance)
 
 
 def safe_settings(machine: Machine, poses: MachinePoses, options: PostOptions) -> SafeSettings:

@@ -60,7 +60,7 @@ def path_deviation(machine: Machine, text: str, result: SimulationResult, *, spa
     _, _, tips = _dense_path(machine, ends, lengths, spacing)
     sample_block = np.maximum(_sample_blocks(lines, result), 0)
     sampled = forward_kinematics(machine, result.joints, tool_length=lengths[sample_block]).tip
-    best = _to_polyline(sampled, tips, np.ones(len(tips), bool))
+    best = _to_polyline(sampled, tips, np.ones(len(tips), bool), spacing)
     is_rapid = rapid[sample_block]
     feeds = float(np.nanmax(best[~is_rapid], initial=0.0))
     between = float(np.nanmax(best[is_rapid], initial=0.0))
@@ -125,24 +125,52 @@ def _sample_blocks(lines: np.ndarray, result: SimulationResult) -> np.ndarray:
     return np.where(named[index] >= 0, named[index], -1)
 
 
-def _to_polyline(points: np.ndarray, vertices: np.ndarray, joined: np.ndarray) -> np.ndarray:
+def _to_polyline(points: np.ndarray, vertices: np.ndarray, joined: np.ndarray, spacing: float) -> np.ndarray:
     """(P,) mm: distance of each point to the polyline through ``vertices`` (V, 3), vertex k joined
     to k + 1 where ``joined[k + 1]`` (a lone vertex counts as a point), in chunks. The vertices must
-    lie closer together than the distances that matter (the nearest few are searched)."""
+    lie closer together than the distances that matter.
+
+    A segment of at most ``spacing`` (mm) nearest a point has an end within half of it of the
+    point's foot on it, so within (distance to the nearest vertex) + spacing / 2 of the point:
+    every vertex that close is searched, not only the nearest few (a path that passes one point
+    many times, pass after pass, has many vertices there, and the nearest few may all belong to
+    other passes)."""
     tree = cKDTree(vertices)
-    k = min(4, len(vertices))
+    half = 0.5 * spacing
+    last = len(vertices) - 1
+
+    def to_segments(point: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+        """Each point's distance to the segments (vertex - 1, vertex) and (vertex, vertex + 1)."""
+        found = np.full(len(point), np.inf)
+        for side in (-1, 0):
+            a = np.clip(vertex + side, 0, last)
+            b = np.clip(a + 1, 0, last)
+            found = np.minimum(found, _to_segment(point, vertices[a], vertices[np.where(joined[b], b, a)]))
+        return found
+
     best = np.full(len(points), np.inf)
     for start in range(0, len(points), CHUNK):
         chunk = points[start:start + CHUNK]
-        _, nearest = tree.query(chunk, k=k)
-        nearest = nearest.reshape(len(chunk), -1)
-        found = np.full(len(chunk), np.inf)
-        for column in range(nearest.shape[1]):
-            for side in (-1, 0):
-                a = np.clip(nearest[:, column] + side, 0, len(vertices) - 1)
-                b = np.clip(a + 1, 0, len(vertices) - 1)
-                b = np.where(joined[b], b, a)
-                found = np.minimum(found, _to_segment(chunk, vertices[a], vertices[b]))
+        k = min(4, len(vertices))
+        distance, nearest = tree.query(chunk, k=k)
+        distance, nearest = distance.reshape(len(chunk), -1), nearest.reshape(len(chunk), -1)
+        found = np.min(np.column_stack([to_segments(chunk, nearest[:, c]) for c in range(k)]), axis=1)
+        # where the k-th nearest vertex is still within reach, every vertex within it (the servo
+        # samples of a standstill are one point: each distinct point once)
+        wide = np.flatnonzero((distance[:, -1] <= distance[:, 0] + half) & (k < len(vertices)))
+        if wide.size:
+            unique, back = np.unique(chunk[wide], axis=0, return_inverse=True)
+            reach = np.zeros(len(unique))
+            np.maximum.at(reach, back.ravel(), distance[wide, 0] + half)
+            near = tree.query_ball_point(unique, reach, return_sorted=False)
+            count = np.fromiter((len(v) for v in near), np.int64, len(near))
+            owner = np.repeat(np.arange(len(unique)), count)
+            vertex = np.fromiter((i for v in near for i in v), np.int64, int(count.sum()))
+            least = np.full(len(unique), np.inf)
+            for rows in range(0, len(owner), CHUNK):  # pairs in chunks
+                part = slice(rows, rows + CHUNK)
+                np.minimum.at(least, owner[part], to_segments(unique[owner[part]], vertex[part]))
+            found[wide] = np.minimum(found[wide], least[back.ravel()])
         best[start:start + CHUNK] = found
     return np.where(np.isfinite(best), best, np.nan)
 
@@ -187,7 +215,7 @@ def cl_deviation(machine: Machine, text: str, result: SimulationResult, tip: np.
     vertices = before + fraction[:, None] * (tip[owner] - before)
     joined = (owner > 0) & ~rapid[owner]
     deviation = np.full(len(result.t), np.nan)
-    deviation[feed] = _to_polyline(sampled, vertices, joined) if len(sampled) else np.empty(0)
+    deviation[feed] = _to_polyline(sampled, vertices, joined, spacing) if len(sampled) else np.empty(0)
     worst = int(np.nanargmax(deviation)) if np.any(np.isfinite(deviation)) else -1
     return ClDeviation(deviation, float(np.nanmax(deviation, initial=0.0)) if worst >= 0 else 0.0,
                        int(lines[block[worst]]) if worst >= 0 else 0, spacing)

@@ -11,7 +11,9 @@ through the part. So no move between cuts is left to the joint interpolation:
   axis within ``rapid_axis_tol``, like a feed move. It never leaves the line downward (toward
   the part): its interior block ends are lifted by half the tolerance above the line (along
   the line's upward normal in its vertical plane, reached within a short ramp at each end),
-  and a block whose joint interpolation dips below the line is split further.
+  and a block whose joint interpolation dips below the line is split further. A rapid with both
+  ends above the envelope's top (not vertical) is free up there, as a turn is: one joint-space
+  line, split only where it would dip below the top.
 - **Retract, reorient, approach** where the axis turns more, the angle pair changes, or the
   straight line leaves the machine's limits, by way of the clearance envelope
   (:attr:`SafeSettings.envelope`): the bounding box of the program's feed points (and a setup
@@ -20,12 +22,14 @@ through the part. So no move between cuts is left to the joint interpolation:
   legs: retract along the current tool axis until the tip leaves the envelope (the box is
   convex: from there on up its axis the whole tool is out too); if it left through a side (a
   nearly horizontal axis, in side work), rise vertically, the axis held, to the top; turn the
-  tool axis there with the tip held still (the rotary joints move about linearly, the sliders
-  keep the tip in place: the table turns about the tip; crossing the pole where the angle pair
-  changes); travel at the top; descend vertically above the new pose's exit point, if it has a
-  side exit; approach along the new tool axis. Retract and approach keep the feed tolerances
-  (``tol``, ``axis_tol``): the tool leaves or enters the cut's surroundings; the rise, turn,
-  travel and descent, outside the envelope, the rapid ones. A tool axis that would have to lower
+  tool axis there in one joint-space line, the tip free to swing above the top (the whole move
+  raised above the top by as much as the line would dip below it, :func:`_free_turns`; where no
+  raise keeps it up there, or the raised points are out of reach, the tip is held still at the
+  top as the rotary joints move about linearly: the table turns about the tip, crossing the pole
+  where the angle pair changes); travel at the top; descend vertically above the new pose's exit
+  point, if it has a side exit; approach along the new tool axis. Retract and approach keep the
+  feed tolerances (``tol``, ``axis_tol``): the tool leaves or enters the cut's surroundings; the
+  rise, turn, travel and descent, outside the envelope, the rapid ones. A tool axis that would have to lower
   the tool to leave the envelope (pointing down) is a problem.
 - **Start, tool changes, end** go through the same logic from and to the machine file's
   joint-space ``positions.home`` and ``positions.tool_change``, reached exactly. Without a
@@ -66,6 +70,8 @@ MAX_POINTS_PER_LEG = 2000
 SAG_FACTOR = 1.25
 #: Fractions of a block where its deviation is measured while splitting.
 MEASURE = np.array([0.25, 0.5, 0.75])
+#: ... and of a free turn, where the tip swings above the envelope's top between its ends.
+MEASURE_TURN = np.linspace(0.0, 1.0, 33)[1:-1]
 #: mm: legs shorter than this, and turns below 1e-9 rad, are left out.
 SHORT = 1e-6
 
@@ -201,7 +207,8 @@ class Legs:
     """Straight pieces of the moves between cuts, L of them: the tip on the segment ``tip0`` ->
     ``tip1`` (lifted by ``lift`` mm along ``up`` in the interior), the axis by spherical
     interpolation, or, where ``reorient``, along the rotary angles (phi1, phi2) from ``phi0`` to
-    ``phi1`` (rad) with the tip still; block fractions ``f0`` -> ``f1`` of CL pose ``pose``."""
+    ``phi1`` (rad) with the tip still (the points a held turn is split at; a free turn, ``above``
+    finite, keeps only above that height); block fractions ``f0`` -> ``f1`` of CL pose ``pose``."""
 
     start: State
     end: State
@@ -223,6 +230,9 @@ class Legs:
     f1: np.ndarray
     final: np.ndarray  # (L,) bool: the leg's end is a block of its own (not the CL pose's)
     move: np.ndarray  # (L,) int: the move between cuts the leg belongs to
+    #: (L,) mm, table-frame z: on a turn, the height the tip keeps above, free to swing between
+    #: its ends (the envelope's top, the turn raised above it); NaN: the tip held still
+    above: np.ndarray
 
     def height(self, leg: np.ndarray, u: np.ndarray) -> np.ndarray:
         """mm: how far the path is lifted above the line at fractions u of legs ``leg``: the full
@@ -276,17 +286,34 @@ def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
         all_leg, all_u, every = np.concatenate(leg), np.concatenate(u), State.join(states)
         q, alpha = every.joints, every.result.alpha
         k, m = all_leg[left], len(left)
-        f = np.tile(MEASURE, m)
-        rows = np.repeat(np.arange(m), len(MEASURE))
+        plain, turning = np.flatnonzero(~np.isfinite(legs.above[k])), np.flatnonzero(np.isfinite(legs.above[k]))
+        rows = np.r_[np.repeat(plain, len(MEASURE)), np.repeat(turning, len(MEASURE_TURN))]
+        f = np.r_[np.tile(MEASURE, len(plain)), np.tile(MEASURE_TURN, len(turning))]
         lo, hi = left[rows], right[rows]
         fk = forward_kinematics(machine, q[lo] + f[:, None] * (q[hi] - q[lo]), tool_length=legs.length[k][rows],
                                 alpha_guess=alpha[lo] + f * (alpha[hi] - alpha[lo]))
-        tip_error = distance_to_segment(fk.tip, every.tip[lo], every.tip[hi])
-        axis_error = angle_to_arc(fk.axis, every.axis[lo], every.axis[hi])
         kk = k[rows]
-        dip = np.where(legs.guard[kk], dip_below(fk.tip, legs.tip0[kk], legs.tip1[kk], legs.up[kk]), 0.0)
+        free = np.isfinite(legs.above[kk])
+        # a free turn is outside the envelope, above its top: its tip may go anywhere up there,
+        # so a dip below the top splits it; its axis follows the rotary angles, a cone about the
+        # table's axis, not the great circle of its ends. It may not sag below the lower of its
+        # own ends by more than a rapid may (what a reader without the CL path judges a rapid by):
+        # there it is cut at its lowest point, on its own joint-space line (the same path)
+        tip_error = np.where(free, 0.0, distance_to_segment(fk.tip, every.tip[lo], every.tip[hi]))
+        axis_error = np.where(free, 0.0, angle_to_arc(fk.axis, every.axis[lo], every.axis[hi]))
+        dip = np.where(legs.guard[kk], dip_below(fk.tip, legs.tip0[kk], legs.tip1[kk], legs.up[kk]),
+                       np.where(free, legs.above[kk] - fk.tip[:, 2], 0.0))
+        sag_below_ends = np.where(free, np.fmin(every.tip[lo, 2], every.tip[hi, 2]) - fk.tip[:, 2], 0.0)
         bad = (~fk.reachable | ~(tip_error <= MARGIN * legs.tol[kk]) | ~(axis_error <= MARGIN * legs.axis_tol[kk])
-               | (dip > DIP_SPLIT))
+               | (dip > DIP_SPLIT) | (sag_below_ends > MARGIN * legs.tol[kk]))
+        # per free turn: where its tip is lowest, and whether it goes below the top anywhere
+        lowest, below_top = np.full(m, 0.5), np.zeros(m, bool)
+        if turning.size:
+            z = fk.tip[len(plain) * len(MEASURE):, 2].reshape(len(turning), -1)
+            lowest[turning] = MEASURE_TURN[np.argmin(np.nan_to_num(z, nan=np.inf), axis=1)]
+            below_top[turning] = np.any(dip[len(plain) * len(MEASURE):].reshape(len(turning), -1) > DIP_SPLIT,
+                                        axis=1)
+        on_line = np.isfinite(legs.above[k]) & ~below_top
         split = np.bincount(rows, bad, minlength=m) > 0
         # A block lifted less than fully at an end (on a ramp) sags below the line near that end
         # unless its sag is small against the lift: with the sag S (its largest deviation from
@@ -302,12 +329,16 @@ def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
         over = (level == MAX_LEVELS) | (np.bincount(all_leg, minlength=n) + counts > MAX_POINTS_PER_LEG)
         unresolved |= over & (counts > 0)
         split &= ~over[k]
-        left, right, k = left[split], right[split], k[split]
+        left, right, k, lowest, on_line = left[split], right[split], k[split], lowest[split], on_line[split]
         if left.size == 0:
             break
-        mid_u = 0.5 * (all_u[left] + all_u[right])
+        mid_u = all_u[left] + np.where(on_line, lowest, 0.5) * (all_u[right] - all_u[left])
         mid = _solve(machine, legs.tip(k, mid_u), legs.axis(k, mid_u), legs.length[k],
                      legs.theta2(k, mid_u, q[left, 4], q[right, 4]), cone)
+        if on_line.any():  # cut on the turn's own line, where its tip is lowest
+            cut = np.flatnonzero(on_line)
+            at = q[left[cut]] + lowest[cut, None] * (q[right[cut]] - q[left[cut]])
+            mid = mid.scatter(cut, at_joints(machine, at, legs.length[k[cut]], cone))
         unreachable = mid.result.status == Status.UNREACHABLE
         unresolved[k[unreachable]] = True
         new = np.arange(size, size + len(k))
@@ -432,22 +463,36 @@ def line_legs(moves: Moves, settings: SafeSettings) -> Legs:
     spherical interpolation), lifted half the rapid tolerance and guarded against dips."""
     k = len(moves.pose)
     up = upward_normal(moves.start.tip, moves.end.tip)
+    # both ends above the envelope's top: nothing of the setup up there, the line is free (a
+    # vertical one stays on its line: a retract)
+    above = np.minimum(moves.start.tip[:, 2], moves.end.tip[:, 2]) >= settings.level
+    vertical = np.all(up == 0, axis=1)
     lift = np.where(np.any(up != 0, axis=1), 0.5 * settings.rapid_tol, 0.0)
     return Legs(moves.start, moves.end, moves.start.tip, moves.end.tip, moves.start.axis, moves.end.axis, up, lift,
                 np.ones(k, bool), np.zeros(k, bool), _angles(moves.start), _angles(moves.end),
                 np.full(k, 0.5 * settings.rapid_tol), np.full(k, settings.rapid_axis_tol), moves.length, moves.pose,
-                moves.f0, moves.f1, moves.final, np.arange(k))
+                moves.f0, moves.f1, moves.final, np.arange(k),
+                np.where(above & ~vertical, settings.level, np.nan))
 
 
-def detour_legs(machine: Machine, moves: Moves, settings: SafeSettings) -> tuple[Legs, np.ndarray]:
+def detour_legs(machine: Machine, moves: Moves, settings: SafeSettings, raised: np.ndarray | None = None
+                ) -> tuple[Legs, np.ndarray]:
     """Up to six legs per move (mm and rad, table frame): retract along the start's tool axis out
     of the clearance envelope (:func:`envelope_exit`), rise vertically from a side exit to the
-    envelope's top (the axis held), turn the axis there with the tip still, travel at the top,
-    descend vertically to the end's side exit, approach along the end's tool axis. Returns the
-    legs and, per move, whether its start or end would have to lower the tool to leave the
-    envelope (a tool axis pointing down)."""
+    envelope's top (the axis held), turn the axis there, travel at the top, descend vertically to
+    the end's side exit, approach along the end's tool axis. Returns the legs and, per move,
+    whether its start or end would have to lower the tool to leave the envelope (a tool axis
+    pointing down).
+
+    ``raised`` (per move, mm; NaN: not free): the move goes this far above the envelope's top, and
+    its turn is one joint-space line, its tip free to swing above the top (split only where it
+    would dip below it); without it the turn holds the tip still at the top."""
     a, b = moves.start, moves.end
     lo, hi = settings.envelope
+    free = np.zeros(len(moves.pose), bool) if raised is None else np.isfinite(raised)
+    if free.any():
+        hi = np.repeat(hi[None], len(free), axis=0)
+        hi[:, 2] += np.where(free, raised, 0.0)
     out_a, out_b = envelope_exit(lo, hi, a.tip, a.axis), envelope_exit(lo, hi, b.tip, b.axis)
     exit_a, exit_b, top_a, top_b = out_a.point, out_b.point, out_a.top, out_b.top
     phi_a, phi_b = _angles(a), _angles(b)
@@ -495,14 +540,65 @@ def detour_legs(machine: Machine, moves: Moves, settings: SafeSettings) -> tuple
             np.full(m, 0.5 * settings.rapid_tol if rapid else settings.tol),
             np.full(m, settings.rapid_axis_tol if rapid else settings.axis_tol), lengths[rows], moves.pose[rows],
             moves.f0[rows] + span * place / total, moves.f0[rows] + span * (place + 1) / total,
-            (place < total - 1) | moves.final[rows], rows))
+            (place < total - 1) | moves.final[rows], rows,
+            np.where(free[rows] & (kind == 2), settings.level, np.nan)))
     legs = Legs(*(State.join([getattr(p, name) for p in pieces]) if name in ("start", "end")
                   else np.concatenate([getattr(p, name) for p in pieces]) for name in _LEG_FIELDS))
     return legs, out_a.down | out_b.down
 
 
 _LEG_FIELDS = ("start", "end", "tip0", "tip1", "axis0", "axis1", "up", "lift", "guard", "reorient", "phi0", "phi1",
-               "tol", "axis_tol", "length", "pose", "f0", "f1", "final", "move")
+               "tol", "axis_tol", "length", "pose", "f0", "f1", "final", "move", "above")
+
+
+#: A free turn goes up by its dip times this, and RAISE_EXTRA mm more (the dip changes as it rises).
+RAISE_FACTOR, RAISE_EXTRA = 1.25, 1.0
+#: Raises tried before a turn holds its tip still instead.
+RAISE_TRIES = 6
+
+
+def _turn_dips(machine: Machine, legs: Legs, level: float, moves: int) -> np.ndarray:
+    """(moves,) mm: per move, how far its turn's joint-space line (one block) takes the tip below
+    ``level`` (table-frame z; -inf without a turn, +inf where a waypoint of the move is not
+    within reach)."""
+    dip = np.full(moves, -np.inf)
+    turn = np.flatnonzero(legs.reorient)
+    if turn.size == 0:
+        return dip
+    q0, q1 = legs.start.joints[turn], legs.end.joints[turn]
+    rows = np.repeat(np.arange(len(turn)), len(MEASURE_TURN))
+    f = np.tile(MEASURE_TURN, len(turn))
+    fk = forward_kinematics(machine, q0[rows] + f[:, None] * (q1 - q0)[rows], tool_length=legs.length[turn][rows])
+    below = np.where(fk.reachable, level - fk.tip[:, 2], np.inf)
+    dip[legs.move[turn]] = np.max(below.reshape(len(turn), -1), axis=1)
+    reached = np.ones(moves, bool)  # every waypoint of the move, raised, within reach
+    np.logical_and.at(reached, legs.move, (legs.start.result.status == Status.OK)
+                      & (legs.end.result.status == Status.OK))
+    return np.where(reached, dip, np.inf)
+
+
+def _free_turns(machine: Machine, moves: Moves, settings: SafeSettings) -> np.ndarray:
+    """(K,) mm: how far above the envelope's top each move turns with its tip free, one joint-space
+    line (NaN: it holds the tip still at the top, where no raise up to RAISE_TRIES keeps the line
+    above the top, or the raised points are out of reach).
+
+    A turn held still at the tip is many short rotary blocks: LinuxCNC runs each to rest
+    (docs/linuxcnc.md), 0.2 s apiece on the impeller's; turned in one block, the table turns at
+    its own acceleration, and above the envelope the tip has nowhere it must be."""
+    count = len(moves.pose)
+    raised = np.zeros(count)
+    chosen = np.full(count, np.nan)
+    todo = np.arange(count)
+    for _ in range(RAISE_TRIES):
+        legs, _down = detour_legs(machine, moves.rows(todo), settings, raised[todo])
+        dip = _turn_dips(machine, legs, settings.level, len(todo))
+        done = dip <= 0.0
+        chosen[todo[done]] = raised[todo[done]]
+        todo, dip = todo[~done & np.isfinite(dip)], dip[~done & np.isfinite(dip)]
+        if todo.size == 0:
+            break
+        raised[todo] += RAISE_FACTOR * dip + RAISE_EXTRA
+    return np.where(np.isfinite(chosen) & (chosen >= 0), chosen, np.nan)
 
 
 @dataclass(frozen=True)
@@ -625,7 +721,8 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
     pieces = [(lines, done, keep)]
     detour = np.r_[np.flatnonzero(~every.line), straight[failed]]
     if detour.size:
-        legs, down = detour_legs(machine, every.rows(detour), settings)
+        legs, down = detour_legs(machine, every.rows(detour), settings, _free_turns(machine, every.rows(detour),
+                                                                                  settings))
         split = split_legs(machine, legs, cone)
         pieces.append((legs, split, np.ones(len(split.leg), bool)))
         for m in np.flatnonzero(down):

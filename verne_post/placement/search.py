@@ -26,11 +26,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
 
-from ..api import Status, classify, joint_bounds, pose_margins
+from ..api import Status, classify, joint_bounds, placeable, pose_margins
+from ..bodies.world import World, cutting
+from ..checks.collision import tool_stacks, tool_use_of_poses
 from ..checks.headroom import UNREACHABLE, describe, headroom, smallest
 from ..checks.limits import Violation, motion_samples
 from ..checks.stage import Checked, check_poses
@@ -339,17 +342,19 @@ def _verify(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: 
 
 
 def _confirm(machine: Machine, poses: MachinePoses, offset: np.ndarray, options: PostOptions
-             ) -> tuple[np.ndarray | None, bool]:
+             ) -> tuple[np.ndarray | None, bool, _Ends | None]:
     """The room's full check at ``offset`` (mm): (None where the program runs, else the CL poses
-    to screen next; whether the screen can see why: False where only bodies meet, which the
-    screen's joint headroom does not know). It stops at the first failure (see
-    :func:`verne_post.checks.stage.check_poses`)."""
+    to screen next; whether the screen of CL poses can see why: False where only bodies meet; the
+    block ends of the CL lines where it fails, for the screen of ends). It stops at the first
+    failure (see :func:`verne_post.checks.stage.check_poses`)."""
     shifted = poses.shifted(offset)
     checked = check_poses(machine, shifted, options, first_failure=True)
     if not checked.violations:
-        return None, True
+        return None, True, None
     screenable = any(v.kind != "collision" for v in checked.violations)
-    return _verdict(machine, poses, shifted, checked).worst, screenable
+    ends = np.flatnonzero(np.isin(shifted.line[checked.blocks.pose], [v.line for v in checked.violations]))
+    ends = np.unique(np.r_[ends, np.maximum(ends - 1, 0)])  # each block's start too
+    return _verdict(machine, poses, shifted, checked).worst, screenable, _Ends.of(machine, poses, checked, offset, ends)
 
 
 def _verdict(machine: Machine, poses: MachinePoses, shifted: MachinePoses, checked: Checked) -> _Verdict:
@@ -386,68 +391,188 @@ def _verdict(machine: Machine, poses: MachinePoses, shifted: MachinePoses, check
 # ----------------------------------------------------------------------------- room
 
 
+#: The room's screen of block ends takes, of every ENDS_STRIDE ends of the cuts at the chosen
+#: offset, the one whose blocks come nearest to a body, where that is under ENDS_CLEARANCE mm
+#: (clear_motion's cap: every end it did not call far). Where a full check then fails at some CL
+#: line, that line's ends join it, the moves between cuts' too: they follow the part by the
+#: safe-motion stage's rules (and the branch stage's on the pole), so they are screened only
+#: where they were seen to fail.
+ENDS_STRIDE = 16
+ENDS_CLEARANCE = 100.0
+
+
+@dataclass(frozen=True)
+class _Ends:
+    """The room's screen of block ends of full checks (tips mm, part frame), each standing still:
+    its joints within their limits and margins, its bodies apart. With the angle pair and theta2
+    (rad) the branch stage chose there, the tool stack, and whether the cutter may touch the
+    stock. Ends at the machine's fixed positions (home, tool change) keep their joints ``fixed``
+    (mm, rad; NaN rows elsewhere): they do not follow the part."""
+
+    tip: np.ndarray
+    axis: np.ndarray
+    length: np.ndarray
+    pair: np.ndarray
+    theta2: np.ndarray
+    stack: np.ndarray
+    cut: np.ndarray
+    fixed: np.ndarray
+    between: np.ndarray  # a move between cuts' end
+
+    @classmethod
+    def of(cls, machine: Machine, poses: MachinePoses, checked: Checked, offset: np.ndarray,
+           ends: np.ndarray | None = None) -> _Ends:
+        """The ends ``ends`` (indices of ``checked.blocks``; None: see ENDS_STRIDE) of a full
+        check at ``offset`` (mm); ``poses`` at work offset 0."""
+        blocks = checked.blocks
+        if ends is None:
+            near = np.full(len(blocks.pose), np.inf)
+            if checked.clearance is not None:
+                near = np.minimum(checked.clearance, np.r_[checked.clearance[1:], np.inf])
+            near[blocks.between] = np.inf
+            padded = np.r_[near, np.full(-len(near) % ENDS_STRIDE, np.inf)].reshape(-1, ENDS_STRIDE)
+            nearest = np.arange(0, padded.size, ENDS_STRIDE) + np.argmin(padded, axis=1)
+            ends = nearest[padded.min(axis=1) < ENDS_CLEARANCE]
+        joints = blocks.joints[ends]
+        fixed = np.zeros(len(ends), bool)
+        for position in (machine.positions.home, machine.positions.tool_change):
+            if position is not None:
+                fixed |= np.all(np.abs(joints - position.joints()) <= 1e-9, axis=1)
+        stacks = tool_stacks(machine, poses)
+        radius = max(float(s.radius[0]) for s in stacks) if stacks else 0.0
+        cut = cutting(poses.setup.shifted(offset), blocks.tip, checked.rapid, radius)[ends]
+        pose = blocks.pose[ends]
+        in_cone = checked.path.in_cone[pose]
+        return cls(blocks.tip[ends] - offset, blocks.axis[ends], poses.tool_length[pose],
+                   np.where(in_cone, 1, blocks.result.pair[ends]).astype(int), np.nan_to_num(joints[:, 4]),
+                   tool_use_of_poses(poses)[pose], cut, np.where(fixed[:, None], joints, np.nan), blocks.between[ends])
+
+    def then(self, other: _Ends) -> _Ends:
+        return _Ends(*(np.concatenate([getattr(self, name), getattr(other, name)])
+                       for name in _Ends.__dataclass_fields__))
+
+    def fail(self, machine: Machine, poses: MachinePoses, offsets: np.ndarray) -> np.ndarray:
+        """(K,) whether some end fails with the part at each offset (K, 3) (mm, table frame): out of
+        reach, a joint limit or margin, or bodies that meet."""
+        found = np.zeros(len(offsets), bool)
+        if not len(self.tip):
+            return found
+        stacks = tool_stacks(machine, poses)
+        moving = np.flatnonzero(np.isnan(self.fixed[:, 0]))
+        for k, offset in enumerate(offsets):
+            joints, alpha = self.fixed.copy(), np.zeros(len(self.tip))
+            for value in np.unique(self.length[moving]):
+                rows = moving[self.length[moving] == value]
+                geom = machine.kinematic_geometry(float(value))
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    ik = machine_ik_working(geom, self.tip[rows] + offset, self.axis[rows], pair=self.pair[rows],
+                                            theta2_at_pole=np.where(self.pair[rows] > 0, self.theta2[rows],
+                                                                    self.theta2[rows] + np.pi))
+                    ok = ik.reachable
+                    room = headroom(machine, ik.joints[ok], margins(geom, ik.joints[ok], ik.platform[ok], ik.alpha[ok]))
+                if not ok.all() or np.any(smallest(room)[0] < 0):
+                    found[k] = True
+                    break
+                joints[rows], alpha[rows] = ik.joints, ik.alpha
+            if found[k] or not machine.bodies.check:
+                continue
+            world = World(machine.bodies, machine.geom, stacks, poses.setup, offset)
+            found[k] = bool(np.any(world.clearance_at(placeable(machine, joints), self.stack, self.cut, alpha) <= 0.0))
+        return found
+
+
 def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarray, offset: np.ndarray,
-          options: PostOptions, tick: Callable[[], None]) -> tuple[tuple[float, float], ...]:
+          options: PostOptions, tick: Callable[[], None], chosen: Checked | None = None
+          ) -> tuple[tuple[float, float], ...]:
     """How far (mm) the part may move from ``offset`` along -x, +x, -y, +y, -z, +z and still run.
 
-    Per direction: bisection on the screened poses (exact kernel) to ROOM_RESOLUTION, its inner
-    end run through the full checks. Where those fail, the failing poses join the screen and
-    the bisection runs again below; what the screen cannot see (bodies that meet, a rapid's
-    joint-space line, a cut that needs both angle pairs) is then bisected with the full checks
-    themselves: the room is the room of everything the post checks, the bodies included.
+    Per direction: bisection on the screens to ROOM_RESOLUTION, its inner end run through the
+    full checks. The screens: the screened CL poses (joints, exact kernel), and, with the full
+    check at ``offset`` (``chosen``), block ends standing still (:class:`_Ends`: the ends of
+    the cuts that came nearest to a body). Where a full check fails, the failing poses
+    join the first and the failing lines' ends the second, and the bisection runs again below;
+    what the screens still cannot see (a block's joint-space line, a cut that needs both angle
+    pairs) is then bisected with the full checks themselves: the room is the room of everything
+    the post checks, the bodies included.
     """
     directions = np.repeat(np.eye(3), 2, axis=0) * np.tile([-1.0, 1.0], 3)[:, None]
     inside = np.zeros(6)  # farthest distance known to run (full checks)
     outside = np.full(6, ROOM_LIMIT)  # nearest distance known to fail
+    failed_at = np.full(6, ROOM_LIMIT)  # nearest distance a full check failed at
     pending = np.arange(6)
+    ends = None if chosen is None else _Ends.of(machine, poses, chosen, offset)
+
     def runs(distance: float, d: int) -> bool:
         return _confirm(machine, poses, offset + distance * directions[d], options)[0] is None
 
+    def bisect_fully(d: int) -> None:
+        """Bisect direction ``d`` with the full checks themselves."""
+        while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
+            middle = (inside[d] + outside[d]) / 2.0
+            if runs(middle, d):
+                inside[d] = middle
+            else:
+                outside[d] = failed_at[d] = middle
+            tick()
+
     for round_ in range(ROUNDS):
         screen = points.screen(rows)
-        lo, hi = _bisect(machine, screen, offset, directions[pending], inside[pending], outside[pending])
+        lo, hi = _bisect(machine, screen, offset, directions[pending], inside[pending], outside[pending],
+                         None if ends is None else partial(ends.fail, machine, poses))
         outside[pending] = hi
         tick()
         failed = []
         for k, d in enumerate(pending):
-            worst, screenable = _confirm(machine, poses, offset + lo[k] * directions[d], options)
+            at = offset + lo[k] * directions[d]
+            worst, screenable, failing = _confirm(machine, poses, at, options)
             tick()
             if worst is None:
                 inside[d] = lo[k]
                 continue
-            outside[d] = lo[k]
+            outside[d] = failed_at[d] = lo[k]
             grown = np.union1d(rows, worst)
-            if not screenable or len(grown) == len(rows) or round_ == ROUNDS - 1:
-                # what the screen cannot see (bodies, a rapid's joint-space line, a cut that
-                # needs both angle pairs): bisect with the full checks themselves
-                while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
-                    middle = (inside[d] + outside[d]) / 2.0
-                    if runs(middle, d):
-                        inside[d] = middle
-                    else:
-                        outside[d] = middle
-                    tick()
+            # the failing ends can join the screen where it sees them fail here and not where the
+            # program runs (ends that do not follow the part, near home, may fail anywhere else)
+            seen = failing is not None and np.array_equal(
+                failing.fail(machine, poses, np.array([at, offset + inside[d] * directions[d]])), [True, False])
+            if round_ < ROUNDS - 1 and (seen or (screenable and len(grown) > len(rows))):
+                if seen:  # the failing ends (where the screens did not look) join the screen of ends
+                    ends = failing if ends is None else ends.then(failing)
+                rows = grown
+                failed.append(d)
                 continue
-            rows = grown
-            failed.append(d)
+            bisect_fully(d)  # what the screens cannot see
         pending = np.array(failed, dtype=int)
         if not pending.size:
             break
+    if ends is not None and ends.between.any():
+        # the moves between cuts' ends follow the part only roughly: where the screen's edge may be
+        # theirs, the full checks confirm that it fails there, else bisect on with them
+        for d in np.flatnonzero(outside < failed_at):
+            if runs(outside[d], d):
+                inside[d], outside[d] = outside[d], failed_at[d]
+                bisect_fully(d)
+            tick()
     return tuple((float(np.floor(inside[2 * a] * 100) / 100), float(np.floor(inside[2 * a + 1] * 100) / 100))
                  for a in range(3))
 
 
 def _bisect(machine: Machine, screen: _Points, offset: np.ndarray, directions: np.ndarray, lo: np.ndarray,
-            hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            hi: np.ndarray, fail: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bisect each direction's distance (mm) between ``lo`` (runs) and ``hi`` (fails or the
-    limit) on the screen, all directions at once; returns the final (lo, hi)."""
+    limit) on the screen, all directions at once; returns the final (lo, hi). ``fail(offsets)``:
+    where the screen of block ends fails, at offsets (K, 3) mm the CL poses' screen passes."""
     lo, hi = lo.copy(), hi.copy()
     # Distances grow fast from the known end, so a wide bracket is narrowed in a few steps.
     while np.any(hi - lo > ROOM_RESOLUTION):
         wide = hi - lo > 64.0
         mid = np.where(wide, lo + np.minimum(np.maximum(2.0 * lo, 16.0), (hi - lo) / 2.0), (lo + hi) / 2.0)
         mid = np.where(hi - lo > ROOM_RESOLUTION, mid, lo)
-        runs = _score(_screen_headroom(machine, screen, offset + mid[:, None] * directions, exact=True)) >= 0
+        offsets = offset + mid[:, None] * directions
+        runs = _score(_screen_headroom(machine, screen, offsets, exact=True)) >= 0
+        ask = np.flatnonzero(runs & (mid > lo))
+        if fail is not None and ask.size:
+            runs[ask] &= ~fail(offsets[ask])
         lo, hi = np.where(runs, mid, lo), np.where(runs | (mid == lo), hi, mid)
     return lo, hi
 
@@ -512,7 +637,7 @@ def place(machine: Machine, poses: MachinePoses, options: PostOptions,
                   else diagnose(machine, poses, options, verdict))
         return Placement(tuple(float(v) for v in offset), False, verdict.margin, verdict.limit, line,
                          ((0.0, 0.0),) * 3, reason, screened, time.perf_counter() - clock, collisions)
-    room = _room(machine, poses, points, rows, offset, options, lambda: progress("room"))
+    room = _room(machine, poses, points, rows, offset, options, lambda: progress("room"), verdict.checked)
     return Placement(tuple(float(v) for v in offset), True, verdict.margin, verdict.limit, line, room, "",
                      screened, time.perf_counter() - clock)
 

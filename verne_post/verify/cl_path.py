@@ -398,7 +398,10 @@ def rapid_block_dips(program: GcodeProgram, motion: Motion, rapid_tol: float, fi
 def _unreached(reference: Reference, matched: np.ndarray, ends: Poses, lines: np.ndarray, tol: float,
                findings: list[Finding]) -> None:
     """A finding per CL pose no block end reaches, at the block between the reached poses around it
-    whose move (the chord of its ends) passes nearest (the earlier one of equals)."""
+    whose move (the chord of its ends) passes nearest (the earlier one of equals); the first pose
+    of a run of unreached ones at the first block before that whose end leaves the CL segment into
+    the pose (farther than ``tol``): where the program leaves the CL path (where the tool turns
+    about a point, a later block may pass nearer)."""
     missing = np.flatnonzero(matched < 0)
     anchors = np.flatnonzero(matched >= 0)
     if missing.size == 0:
@@ -419,6 +422,23 @@ def _unreached(reference: Reference, matched: np.ndarray, ends: Poses, lines: np
         order = np.lexsort((block, distance, owner))
         best = order[np.r_[True, owner[order][1:] != owner[order][:-1]]]
         gap[rows], where[rows] = distance[best], block[best]
+    # the first pose of each run: the first block whose end leaves the CL segment into it
+    first = np.flatnonzero(np.r_[True, np.diff(missing) > 1] & (before >= 0) & (before + 1 < where))
+    if first.size:
+        span = where[first] - before[first]
+        for rows in _chunks(span):
+            owner = np.repeat(np.arange(rows.stop - rows.start), span[rows])
+            run = first[rows][owner]
+            block = before[run] + 1 + _ranks(span[rows])
+            pose = missing[run]
+            off = ~(distance_to_segment(ends.tip[block], reference.tip[pose - 1], reference.tip[pose]) <= tol)
+            left = np.full(rows.stop - rows.start, np.iinfo(np.int64).max)
+            np.minimum.at(left, owner[off], block[off])
+            found = left < where[first[rows]]
+            at = first[rows][found]
+            where[at] = left[found]
+            gap[at] = np.nan_to_num(distance_to_segment(reference.tip[missing[at]], ends.tip[where[at] - 1],
+                                                        ends.tip[where[at]]), nan=np.inf)
     for j, k in enumerate(missing):
         near = f" (the move passes {gap[j]:.4f} mm from it)" if math.isfinite(gap[j]) else ""
         findings.append(Finding(int(lines[where[j]]), "reach", "no block end reaches this CL point" + near,
