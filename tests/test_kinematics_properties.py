@@ -282,3 +282,85 @@ def test_pole_takes_theta2_from_the_hint(machine: vp.Machine) -> None:
         fk = vp.forward_kinematics(machine, ik.joints)
         np.testing.assert_allclose(fk.tip, tip, atol=1e-9)
         np.testing.assert_allclose(fk.axis, axis, atol=1e-12)
+
+
+def test_the_working_mode_ik_finds_every_pose_the_all_solutions_route_solves(machine: vp.Machine) -> None:
+    """Tool poses over a box wider than the VERNE's reach, tilted up to 100 degrees, both angle
+    pairs: the working-mode IK (Newton, then the all-solutions route unless eq. 31 has surely no
+    other root, see full._only_working_root) reaches exactly the poses where the all-solutions
+    route (every root of the sextic) has a working-mode solution of that pair, at the same joints."""
+    rng = np.random.default_rng(12)
+    n = 20_000
+    for length in (0.0, 100.0):
+        geom = machine.kinematic_geometry(length)
+        tip = rng.uniform([-700.0, -700.0, -300.0], [700.0, 700.0, 700.0], size=(n, 3))
+        tilt, turn = rng.uniform(0.0, np.radians(100.0), n), rng.uniform(-np.pi, np.pi, n)
+        axis = np.column_stack([np.sin(tilt) * np.cos(turn), np.sin(tilt) * np.sin(turn), np.cos(tilt)])
+        solutions = machine_ik_all(geom, tip, axis)
+        reached = 0
+        for pair in (1, -1):
+            fast = machine_ik_working(geom, tip, axis, pair=pair)
+            chosen = solutions.working_mode & (solutions.pair == pair)
+            order = np.lexsort((np.abs(solutions.alpha[chosen]), solutions.pose_index[chosen]))
+            index, first = np.unique(solutions.pose_index[chosen][order], return_index=True)
+            assert np.array_equal(index, np.flatnonzero(fast.reachable))
+            assert _joint_error(solutions.joints[chosen][order][first], fast.joints[index]).max() <= 1e-8
+            reached += index.size
+        # both kinds are many: poses in reach and out of it
+        assert 0.1 * n < reached < 1.9 * n, reached
+
+
+def test_roots_are_counted_in_an_interval_as_every_root_of_the_polynomial_says() -> None:
+    """roots_within against numpy's roots of 20,000 random sextics on random intervals: where it
+    says 0 or 1, that is how many real roots lie inside; it is sure on most."""
+    from verne_post.kinematics.trigpoly import roots_within
+    rng = np.random.default_rng(3)
+    num = rng.normal(size=(20_000, 7)) * rng.uniform(0.1, 10.0, size=(20_000, 1))
+    sure = 0
+    for lo, hi in ((-0.4, 0.4), (-0.4, -0.1), (0.0, 0.25), (0.1, 0.9)):
+        counted = roots_within(num, lo, hi)
+        for row in np.flatnonzero(counted >= 0)[:3000]:
+            roots = np.roots(num[row, ::-1])
+            real = roots[np.abs(roots.imag) <= 1e-9].real
+            assert np.count_nonzero((real > lo) & (real < hi)) == counted[row], (row, lo, hi, real)
+        sure += int(np.count_nonzero(counted >= 0))
+    assert sure > 0.5 * 4 * len(num), sure
+
+
+def test_a_root_of_eq_31_is_called_the_only_one_only_where_numpy_finds_no_other(machine: vp.Machine) -> None:
+    """full._only_working_root against every root of the sextic by numpy's eigenvalues, on random
+    platform coefficients: where it says a root of the signed eq. 31 is the only one in
+    (-alpha_max, alpha_max), no other root there makes the signed form vanish; where there is
+    another, it says so; it is sure on most rows with one root."""
+    from verne_post.kinematics.full import _coupling, _only_working_root
+    from verne_post.kinematics.trigpoly import TrigPoly
+    g = machine.kinematic_geometry(0.0)
+    k, two_rr = g.L1**2 - g.R1**2 - g.r1**2, 2.0 * g.R1 * g.r1
+    rng = np.random.default_rng(4)
+    n = 4_000
+    a, b = rng.uniform(-400.0, 400.0, n), rng.uniform(-900.0, 900.0, n)
+    x1sq = rng.uniform(0.0, 1.05 * (k + two_rr), n)
+
+    def signed(alpha: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        c, s = np.cos(alpha), np.sin(alpha)
+        with np.errstate(invalid="ignore"):
+            return ((a[rows] * c + b[rows] * s) * np.sqrt(g.R1**2 + g.r1**2 - two_rr * c)
+                    + g.R1 * s * np.sqrt(k + two_rr * c - x1sq[rows]))
+
+    num = _coupling(g, np.sqrt(x1sq), a, b, *TrigPoly.cos_sin(n)).num
+    rows, roots, others = [], [], []
+    for row in range(n):
+        found = np.roots(num[row, ::-1])
+        alpha = 2.0 * np.arctan(found[np.abs(found.imag) <= 1e-9].real)
+        alpha = alpha[np.abs(alpha) < g.alpha_max]
+        f = np.abs(signed(alpha, np.full(len(alpha), row)))
+        scale = np.abs(a[row]) + np.abs(b[row]) + g.R1
+        working = alpha[f <= 1e-6 * scale * g.R1]
+        if working.size:
+            rows.append(row)
+            roots.append(working[0])
+            others.append(working.size > 1)
+    rows, roots, others = np.array(rows), np.array(roots), np.array(others)
+    only = _only_working_root(g, a[rows], b[rows], x1sq[rows], roots)
+    assert not np.any(only & others)
+    assert others.sum() > 20 and only.sum() > 0.5 * (~others).sum(), (others.sum(), only.sum(), (~others).sum())

@@ -28,7 +28,7 @@ from .module import (
     solutions_for_alpha,
     working_sliders,
 )
-from .trigpoly import TrigPoly, real_half_angle_roots
+from .trigpoly import TrigPoly, real_half_angle_roots, roots_within
 
 #: Below this sin(phi1) the axis is taken as the table normal (theta2 from the caller).
 POLE_EPS = 1e-12
@@ -109,6 +109,42 @@ def _platform_pose(geom: Geometry, xp: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.stack([xp, a * c + b * s, geom.da - b * c + a * s], axis=-1)
 
 
+#: Pieces of (-alpha_max, alpha_max) in which eq. 31's roots are counted (:func:`_only_working_root`).
+ROOT_PIECES = 8
+
+
+def _only_working_root(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.ndarray, root: np.ndarray
+                       ) -> np.ndarray:
+    """(N,) bool: where ``root`` (rad), a root of the signed eq. 31 (working mode, s1 = -1) in
+    (-alpha_max, alpha_max), is surely its only one there. Eq. 31 squared (:func:`_coupling`, a
+    sextic in tan(alpha/2)) is F F~, the signed forms of both assemblies of leg I. Its roots are
+    counted in ROOT_PIECES pieces (:func:`roots_within`); each piece must hold none, or exactly
+    one: ``root`` itself, or a root of F~ alone, which a piece tells by F keeping its sign over it
+    (at a simple root of F F~ that is F's, F changes sign). Not sure anywhere (a root near a
+    piece's end, a coefficient near 0, leg I out of reach at an end): False."""
+    g = geom
+    k = g.L1**2 - g.R1**2 - g.r1**2
+    two_rr = 2.0 * g.R1 * g.r1
+    edges = np.linspace(-g.alpha_max, g.alpha_max, ROOT_PIECES + 1)
+    poly = _coupling(geom, np.sqrt(x1sq), a, b, *TrigPoly.cos_sin(len(a)))
+    num = poly.num / np.max(np.abs(poly.num), axis=1, keepdims=True)
+    t = np.tan(0.5 * edges)
+    at_edges = np.polynomial.polynomial.polyval(t, num.T)  # (N, pieces + 1): F F~ at the ends
+    c, s = np.cos(edges), np.sin(edges)
+    h_squared = k + two_rr * c - x1sq[:, None]
+    with np.errstate(invalid="ignore"):
+        f = (a[:, None] * c + b[:, None] * s) * np.sqrt(g.R1**2 + g.r1**2 - two_rr * c) + g.R1 * s * np.sqrt(h_squared)
+    sure = np.all(np.abs(at_edges) > 1e-9, axis=1)
+    piece = np.searchsorted(edges, root) - 1
+    sure &= np.all(np.abs(root[:, None] - edges) > 1e-9, axis=1)
+    for j in range(ROOT_PIECES):
+        count = roots_within(num, t[j], t[j + 1])
+        own = piece == j
+        sign_kept = (f[:, j] * f[:, j + 1] > 0) & (h_squared[:, j] >= 0) & (h_squared[:, j + 1] >= 0)
+        sure &= np.where(own, count == 1, (count == 0) | ((count == 1) & sign_kept))
+    return sure
+
+
 @dataclass(frozen=True)
 class MachineIK:
     """Working-mode IK for N tool poses; NaN rows where the pose is unreachable."""
@@ -163,6 +199,20 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     joints = np.column_stack([rho, alpha - phi1, -phi2])
     leg_one_reaches = x1sq <= k + two_rr
     retry = np.flatnonzero(~good & leg_one_reaches & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
+    if retry.size and exact_fallback:
+        # Newton found a root of eq. 31 in (-alpha_max, alpha_max) where a leg does not reach: if
+        # it is the only root there, no working solution exists and the all-solutions route (the
+        # sextic's eigenvalues, most of this function's time where poses are out of reach) would
+        # find none
+        with np.errstate(invalid="ignore"):
+            c, s = np.cos(alpha[retry]), np.sin(alpha[retry])
+            y, gq = a[retry] * c + b[retry] * s, np.sqrt(g.R1**2 + g.r1**2 - two_rr * c)
+            residual = y * gq + g.R1 * s * np.sqrt(k + two_rr * c - x1sq[retry])
+        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(y) * gq + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
+                       & ~np.all(np.isfinite(rho[retry]), axis=-1))
+        if newton_root.any():
+            rows = retry[newton_root]
+            retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows], alpha[rows])])
     if retry.size and exact_fallback:
         exact = _machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
         wm = exact.working_mode

@@ -111,3 +111,29 @@ def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> tuple[np.n
     angle = np.concatenate([2.0 * np.arctan(np.concatenate(parts_t)), np.full(n, np.pi)])
     order = np.argsort(index, kind="stable")
     return index[order], angle[order]
+
+
+def _vincent(d: int, lo: float, hi: float) -> np.ndarray:
+    """(d + 1, d + 1): ascending coefficients of q(x) = (1 + x)^d p((lo + hi x) / (1 + x)) from p's,
+    so that q's positive roots are p's roots in (lo, hi)."""
+    transform = np.zeros((d + 1, d + 1))
+    for j in range(d + 1):
+        term = np.polynomial.polynomial.polypow([lo, hi], j)
+        product = np.polynomial.polynomial.polymul(term, np.polynomial.polynomial.polypow([1.0, 1.0], d - j))
+        transform[:len(product), j] = product  # (hi = 0 lowers the degree)
+    return transform
+
+
+def roots_within(num: np.ndarray, lo: float, hi: float, unsure: float = 1e-9) -> np.ndarray:
+    """(N,) int: how many real roots (with multiplicity) the polynomial of each row (ascending
+    coefficients in t, (N, d + 1)) has in (lo, hi), where that is sure: 0 or 1; else -1.
+    Descartes' rule of signs on q(x) = (1 + x)^d p((lo + hi x) / (1 + x)), whose positive roots
+    are p's roots in (lo, hi) (Vincent's transform): no sign variation in q's coefficients means
+    no such root, one means exactly one. A coefficient within ``unsure`` (relative to the largest)
+    of 0 could have either sign (a zero hides how many variations it stands for): not sure."""
+    q = num @ _vincent(num.shape[1] - 1, lo, hi).T
+    size = np.max(np.abs(q), axis=1, keepdims=True)
+    sure = np.all(np.abs(q) > unsure * size, axis=1) & np.isfinite(size[:, 0])
+    sign = np.sign(q)
+    variations = np.count_nonzero(sign[:, 1:] != sign[:, :-1], axis=1)
+    return np.where(sure & (variations <= 1), variations, -1)
