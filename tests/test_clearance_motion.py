@@ -37,17 +37,22 @@ def _brute(sample, pair, joints: np.ndarray, stack: np.ndarray) -> np.ndarray:
     f = np.linspace(0.0, 1.0, DENSE + 1)
     q = (joints[:-1, None] + f[None, :, None] * (joints[1:, None] - joints[:-1, None])).reshape(-1, 5)
     placed = sample(q, np.repeat(stack[1:], DENSE + 1), None)
-    known = np.isfinite(placed.alpha)
-    a = placed.bodies[pair.moving][known]
-    body_a = pair.kind(a[:, 0], a[:, 1], placed.radius[pair.moving][known])
-    if pair.fixed is None:
-        b = placed.bodies[pair.other][known]
-        body_b = Capsules(b[:, 0], b[:, 1], placed.radius[pair.other][known])
-    else:
-        body_b = rows(pair.fixed, np.zeros(int(known.sum()), int))
+    known = np.flatnonzero(np.isfinite(placed.alpha))
     least = np.full(len(q), np.inf)
-    least[known] = distance(body_a, body_b)
+    least[known] = _pair_distance(placed, pair, known)
     return least.reshape(len(joints) - 1, DENSE + 1).min(axis=1)
+
+
+def _pair_distance(placed, pair, index: np.ndarray) -> np.ndarray:
+    """(len(index),) mm: the pair's distance at the placed samples ``index``, the bodies built here."""
+    a = placed.bodies[pair.moving][index]
+    body_a = pair.kind(a[:, 0], a[:, 1], placed.radius[pair.moving][index])
+    if pair.fixed is None:
+        b = placed.bodies[pair.other][index]
+        body_b = Capsules(b[:, 0], b[:, 1], placed.radius[pair.other][index])
+    else:
+        body_b = rows(pair.fixed, np.zeros(len(index), int))
+    return distance(body_a, body_b)
 
 
 def _beside_a_clamp(machine: vp.Machine, start: np.ndarray, gap: float, m: int) -> tuple[World, np.ndarray]:
@@ -164,14 +169,7 @@ def test_the_clearance_of_bodies_standing_still_is_every_pairs_least_distance() 
         least = np.full(m, np.inf)
         for pair in world.pairs(stack, cut):
             rows_ = np.flatnonzero(known & (True if pair.active is None else pair.active))
-            a = placed.bodies[pair.moving][rows_]
-            body_a = pair.kind(a[:, 0], a[:, 1], placed.radius[pair.moving][rows_])
-            if pair.fixed is None:
-                b = placed.bodies[pair.other][rows_]
-                body_b = Capsules(b[:, 0], b[:, 1], placed.radius[pair.other][rows_])
-            else:
-                body_b = rows(pair.fixed, np.zeros(len(rows_), int))
-            np.minimum.at(least, rows_, distance(body_a, body_b))
+            np.minimum.at(least, rows_, _pair_distance(placed, pair, rows_))
         valid = known & np.isfinite(least)
         assert np.allclose(np.minimum(screened[valid], margin), np.minimum(least[valid], margin), atol=SETTLED)
         assert np.array_equal(screened[valid] <= 0.0, least[valid] <= 0.0)

@@ -122,27 +122,31 @@ def _only_working_root(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.nd
     one: ``root`` itself, or a root of F~ alone, which a piece tells by F keeping its sign over it
     (at a simple root of F F~ that is F's, F changes sign). Not sure anywhere (a root near a
     piece's end, a coefficient near 0, leg I out of reach at an end): False."""
-    g = geom
-    k = g.L1**2 - g.R1**2 - g.r1**2
-    two_rr = 2.0 * g.R1 * g.r1
-    edges = np.linspace(-g.alpha_max, g.alpha_max, ROOT_PIECES + 1)
+    edges = np.linspace(-geom.alpha_max, geom.alpha_max, ROOT_PIECES + 1)
     poly = _coupling(geom, np.sqrt(x1sq), a, b, *TrigPoly.cos_sin(len(a)))
     num = poly.num / np.max(np.abs(poly.num), axis=1, keepdims=True)
     t = np.tan(0.5 * edges)
     at_edges = np.polynomial.polynomial.polyval(t, num.T)  # (N, pieces + 1): F F~ at the ends
-    c, s = np.cos(edges), np.sin(edges)
-    h_squared = k + two_rr * c - x1sq[:, None]
-    with np.errstate(invalid="ignore"):
-        f = (a[:, None] * c + b[:, None] * s) * np.sqrt(g.R1**2 + g.r1**2 - two_rr * c) + g.R1 * s * np.sqrt(h_squared)
+    f = _signed_coupling(geom, a[:, None], b[:, None], x1sq[:, None], edges)[0]  # NaN: leg I out of reach
     sure = np.all(np.abs(at_edges) > 1e-9, axis=1)
     piece = np.searchsorted(edges, root) - 1
     sure &= np.all(np.abs(root[:, None] - edges) > 1e-9, axis=1)
     for j in range(ROOT_PIECES):
         count = roots_within(num, t[j], t[j + 1])
-        own = piece == j
-        sign_kept = (f[:, j] * f[:, j + 1] > 0) & (h_squared[:, j] >= 0) & (h_squared[:, j + 1] >= 0)
-        sure &= np.where(own, count == 1, (count == 0) | ((count == 1) & sign_kept))
+        sign_kept = f[:, j] * f[:, j + 1] > 0  # False where NaN
+        sure &= np.where(piece == j, count == 1, (count == 0) | ((count == 1) & sign_kept))
     return sure
+
+
+def _signed_coupling(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.ndarray, alpha: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 31 in its signed form (working mode, s1 = -1) at ``alpha`` (rad), F = y G + R1 sin(alpha)
+    H (NaN where leg I does not reach), and its term y G (mm^2), whose size scales F."""
+    g = geom
+    c, s = np.cos(alpha), np.sin(alpha)
+    yg = (a * c + b * s) * np.sqrt(g.R1**2 + g.r1**2 - 2.0 * g.R1 * g.r1 * c)
+    with np.errstate(invalid="ignore"):
+        return yg + g.R1 * s * np.sqrt(g.L1**2 - g.R1**2 - g.r1**2 + 2.0 * g.R1 * g.r1 * c - x1sq), yg
 
 
 @dataclass(frozen=True)
@@ -204,11 +208,8 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
         # it is the only root there, no working solution exists and the all-solutions route (the
         # sextic's eigenvalues, most of this function's time where poses are out of reach) would
         # find none
-        with np.errstate(invalid="ignore"):
-            c, s = np.cos(alpha[retry]), np.sin(alpha[retry])
-            y, gq = a[retry] * c + b[retry] * s, np.sqrt(g.R1**2 + g.r1**2 - two_rr * c)
-            residual = y * gq + g.R1 * s * np.sqrt(k + two_rr * c - x1sq[retry])
-        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(y) * gq + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
+        residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
+        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
                        & ~np.all(np.isfinite(rho[retry]), axis=-1))
         if newton_root.any():
             rows = retry[newton_root]

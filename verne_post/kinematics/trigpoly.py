@@ -8,6 +8,8 @@ as ordinary arithmetic on ``c`` and ``s``; called with arrays they evaluate, cal
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 _ONE_PLUS_T2 = np.array([1.0, 0.0, 1.0])
@@ -113,9 +115,11 @@ def real_half_angle_roots(num: np.ndarray, imag_tol: float = 1e-6) -> tuple[np.n
     return index[order], angle[order]
 
 
+@lru_cache(maxsize=64)
 def _vincent(d: int, lo: float, hi: float) -> np.ndarray:
     """(d + 1, d + 1): ascending coefficients of q(x) = (1 + x)^d p((lo + hi x) / (1 + x)) from p's,
-    so that q's positive roots are p's roots in (lo, hi)."""
+    so that q's positive roots are p's roots in (lo, hi) (the same few intervals on every call:
+    cached, not to be written to)."""
     transform = np.zeros((d + 1, d + 1))
     for j in range(d + 1):
         term = np.polynomial.polynomial.polypow([lo, hi], j)

@@ -286,14 +286,15 @@ def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
         all_leg, all_u, every = np.concatenate(leg), np.concatenate(u), State.join(states)
         q, alpha = every.joints, every.result.alpha
         k, m = all_leg[left], len(left)
-        plain, turning = np.flatnonzero(~np.isfinite(legs.above[k])), np.flatnonzero(np.isfinite(legs.above[k]))
+        free_turn = np.isfinite(legs.above[k])
+        plain, turning = np.flatnonzero(~free_turn), np.flatnonzero(free_turn)
         rows = np.r_[np.repeat(plain, len(MEASURE)), np.repeat(turning, len(MEASURE_TURN))]
         f = np.r_[np.tile(MEASURE, len(plain)), np.tile(MEASURE_TURN, len(turning))]
         lo, hi = left[rows], right[rows]
         fk = forward_kinematics(machine, q[lo] + f[:, None] * (q[hi] - q[lo]), tool_length=legs.length[k][rows],
                                 alpha_guess=alpha[lo] + f * (alpha[hi] - alpha[lo]))
         kk = k[rows]
-        free = np.isfinite(legs.above[kk])
+        free = free_turn[rows]
         # a free turn is outside the envelope, above its top: its tip may go anywhere up there,
         # so a dip below the top splits it; its axis follows the rotary angles, a cone about the
         # table's axis, not the great circle of its ends. It may not sag below the lower of its
@@ -313,7 +314,7 @@ def split_legs(machine: Machine, legs: Legs, cone: float) -> Split:
             lowest[turning] = MEASURE_TURN[np.argmin(np.nan_to_num(z, nan=np.inf), axis=1)]
             below_top[turning] = np.any(dip[len(plain) * len(MEASURE):].reshape(len(turning), -1) > DIP_SPLIT,
                                         axis=1)
-        on_line = np.isfinite(legs.above[k]) & ~below_top
+        on_line = free_turn & ~below_top
         split = np.bincount(rows, bad, minlength=m) > 0
         # A block lifted less than fully at an end (on a ramp) sags below the line near that end
         # unless its sag is small against the lift: with the sag S (its largest deviation from
@@ -721,8 +722,8 @@ def between_cuts(machine: Machine, poses: MachinePoses, blocks: Blocks, settings
     pieces = [(lines, done, keep)]
     detour = np.r_[np.flatnonzero(~every.line), straight[failed]]
     if detour.size:
-        legs, down = detour_legs(machine, every.rows(detour), settings, _free_turns(machine, every.rows(detour),
-                                                                                  settings))
+        around = every.rows(detour)
+        legs, down = detour_legs(machine, around, settings, _free_turns(machine, around, settings))
         split = split_legs(machine, legs, cone)
         pieces.append((legs, split, np.ones(len(split.leg), bool)))
         for m in np.flatnonzero(down):

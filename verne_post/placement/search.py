@@ -168,10 +168,12 @@ def _spread(poses: MachinePoses, machine: Machine, size: int) -> np.ndarray:
 
 
 def _smallest_headroom(machine: Machine, tip: np.ndarray, axis: np.ndarray, length: np.ndarray, pair: np.ndarray,
-                       theta2: np.ndarray, exact: bool) -> np.ndarray:
+                       theta2: np.ndarray, exact: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(N,) smallest headroom of tool poses (tips mm, table frame; tool lengths mm) with angle
-    pairs ``pair`` (+1, -1); on the pole theta2 (rad), turned by pi for pair -1."""
+    pairs ``pair`` (+1, -1); on the pole theta2 (rad), turned by pi for pair -1. With the joints
+    (N, 5) mm, rad and the platform's tilt (N,) rad found (NaN where out of reach)."""
     values = np.full((len(tip), 9), np.nan)
+    joints, alpha = np.full((len(tip), 5), np.nan), np.full(len(tip), np.nan)
     at_pole = np.where(pair > 0, theta2, theta2 + np.pi)
     for value in np.unique(length):
         rows = np.flatnonzero(length == value)
@@ -182,7 +184,8 @@ def _smallest_headroom(machine: Machine, tip: np.ndarray, axis: np.ndarray, leng
             ok = ik.reachable
             values[rows[ok]] = headroom(machine, ik.joints[ok], margins(geom, ik.joints[ok], ik.platform[ok],
                                                                         ik.alpha[ok]))
-    return smallest(values)[0]
+        joints[rows], alpha[rows] = ik.joints, ik.alpha
+    return smallest(values)[0], joints, alpha
 
 
 def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exact: bool = False) -> np.ndarray:
@@ -199,7 +202,7 @@ def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exa
     theta2 = np.tile(screen.theta2, k)
 
     def found(pair: np.ndarray, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        return _smallest_headroom(machine, tip[rows], axis[rows], length[rows], pair, theta2[rows], exact)
+        return _smallest_headroom(machine, tip[rows], axis[rows], length[rows], pair, theta2[rows], exact)[0]
 
     if not np.any(screen.pair):
         return np.maximum(found(np.ones(k * s)), found(-np.ones(k * s))).reshape(k, s)
@@ -461,19 +464,10 @@ class _Ends:
         moving = np.flatnonzero(np.isnan(self.fixed[:, 0]))
         for k, offset in enumerate(offsets):
             joints, alpha = self.fixed.copy(), np.zeros(len(self.tip))
-            for value in np.unique(self.length[moving]):
-                rows = moving[self.length[moving] == value]
-                geom = machine.kinematic_geometry(float(value))
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    ik = machine_ik_working(geom, self.tip[rows] + offset, self.axis[rows], pair=self.pair[rows],
-                                            theta2_at_pole=np.where(self.pair[rows] > 0, self.theta2[rows],
-                                                                    self.theta2[rows] + np.pi))
-                    ok = ik.reachable
-                    room = headroom(machine, ik.joints[ok], margins(geom, ik.joints[ok], ik.platform[ok], ik.alpha[ok]))
-                if not ok.all() or np.any(smallest(room)[0] < 0):
-                    found[k] = True
-                    break
-                joints[rows], alpha[rows] = ik.joints, ik.alpha
+            room, joints[moving], alpha[moving] = _smallest_headroom(
+                machine, self.tip[moving] + offset, self.axis[moving], self.length[moving], self.pair[moving],
+                self.theta2[moving], exact=True)
+            found[k] = bool(np.any(room < 0))  # out of reach too (UNREACHABLE)
             if found[k] or not machine.bodies.check:
                 continue
             world = World(machine.bodies, machine.geom, stacks, poses.setup, offset)
