@@ -23,10 +23,12 @@ import numpy as np  # noqa: E402
 import verne_post as vp  # noqa: E402
 from verne_post.api import Status, classify, pose_margins  # noqa: E402
 from verne_post.kinematics import (  # noqa: E402
+    kernels,
     machine_fk_all,
     machine_fk_working,
     machine_ik_all,
     machine_ik_working,
+    margins,
     wrap_angle,
 )
 
@@ -126,9 +128,27 @@ def main() -> None:
     joints, tip, axis = usable_poses(machine, args.poses)
     pair = np.where(wrap_angle(vp.forward_kinematics(machine, joints).alpha - joints[:, 3]) >= 0, 1, -1)
 
-    ik_rate = rate(lambda: machine_ik_working(geom, tip, axis, pair=pair), len(tip))
-    api_rate = rate(lambda: vp.inverse_kinematics(machine, tip, axis), len(tip), repeat=1)
-    fk_rate = rate(lambda: machine_fk_working(geom, joints), len(tip))
+    n = len(tip)
+    warm = vp.forward_kinematics(machine, joints).alpha + np.random.default_rng(1).normal(0.0, 1e-3, n)
+    fk = vp.forward_kinematics(machine, joints)
+    paths = {  # name: (call, repeats)
+        "working-mode IK (closed form, vectorised)": (lambda: machine_ik_working(geom, tip, axis, pair=pair), 3),
+        "  inverse_kinematics API (pairs, status, margins)": (lambda: vp.inverse_kinematics(machine, tip, axis), 1),
+        "  margins of the working-mode poses": (lambda: margins(geom, joints, fk.platform, fk.alpha), 3),
+        "working-mode FK (vectorised)": (lambda: machine_fk_working(geom, joints), 3),
+        "  the same started from a neighbour's tilt": (lambda: machine_fk_working(geom, joints, warm), 3),
+    }
+    routes: dict[str, dict[str, float]] = {}
+    for name in ("numpy", "numba"):
+        os.environ[kernels.ROUTE_VARIABLE] = name
+        kernels._numba_kernels.cache_clear()
+        if kernels.route().split()[0] != name:
+            continue  # numba not installed
+        for path, (call, repeat) in paths.items():
+            rate(call, n, repeat=1)  # the first call of a route compiles or loads its loops
+            routes.setdefault(path, {})[name] = rate(call, n, repeat=repeat)
+    os.environ.pop(kernels.ROUTE_VARIABLE)
+    kernels._numba_kernels.cache_clear()
     m = args.all_solutions
     ik_all_rate = rate(lambda: machine_ik_all(geom, tip[:m], axis[:m]), m, repeat=1)
     fk_all_rate = rate(lambda: machine_fk_all(geom, joints[:m]), m, repeat=1)
@@ -146,16 +166,20 @@ def main() -> None:
     fk_agree = np.mean(np.max(np.abs(fk_newton[:, :3] - machine_fk_working(geom, joints[:b]).platform), axis=1)
                        < 1e-6)
 
-    print(f"\n{'path':<46}{'per second':>14}{'x Newton':>10}")
-    print(f"{'working-mode IK (closed form, vectorised)':<46}{ik_rate:>14,.0f}{ik_rate / newton_ik_rate:>10.0f}")
-    print(f"{'  inverse_kinematics API (pairs, status, margins)':<46}{api_rate:>14,.0f}"
-          f"{api_rate / newton_ik_rate:>10.0f}")
-    print(f"{'all-solutions IK (sextic, both pairs)':<46}{ik_all_rate:>14,.0f}"
+    print(f"\n{'path, per second on one core':<52}{'numpy':>12}{'numba':>12}{'ratio':>8}{'x Newton':>10}")
+    for path, found in routes.items():
+        compiled = found.get("numba", float("nan"))
+        newton = newton_fk_rate if "FK" in path else newton_ik_rate
+        print(f"{path:<52}{found['numpy']:>12,.0f}{compiled:>12,.0f}{compiled / found['numpy']:>8.2f}"
+              f"{max(found.values()) / newton:>10.0f}")
+    print(f"{'all-solutions IK (sextic, both pairs)':<52}{ik_all_rate:>12,.0f}{'':>12}{'':>8}"
           f"{ik_all_rate / newton_ik_rate:>10.1f}")
-    print(f"{'Newton-Raphson IK, per point (baseline)':<46}{newton_ik_rate:>14,.0f}{1:>10}")
-    print(f"{'working-mode FK (vectorised)':<46}{fk_rate:>14,.0f}{fk_rate / newton_fk_rate:>10.0f}")
-    print(f"{'all-modes FK (degree-12 eliminant)':<46}{fk_all_rate:>14,.0f}{fk_all_rate / newton_fk_rate:>10.1f}")
-    print(f"{'Newton-Raphson FK, per point (baseline)':<46}{newton_fk_rate:>14,.0f}{1:>10}")
+    print(f"{'Newton-Raphson IK, per point (baseline)':<52}{newton_ik_rate:>12,.0f}{'':>12}{'':>8}{1:>10}")
+    print(f"{'all-modes FK (degree-12 eliminant)':<52}{fk_all_rate:>12,.0f}{'':>12}{'':>8}"
+          f"{fk_all_rate / newton_fk_rate:>10.1f}")
+    print(f"{'Newton-Raphson FK, per point (baseline)':<52}{newton_fk_rate:>12,.0f}{'':>12}{'':>8}{1:>10}")
+    print(f"\nnumba: {'not installed' if 'numba' not in routes[next(iter(routes))] else 'the compiled loops'} "
+          f"(verne_post/kinematics/_loops.py); the ratio is numba over numpy, same poses, same run")
     print(f"\nposes: {len(tip):,} (all-solutions on {m:,}, Newton on {b:,}); Newton reached the same joints "
           f"(1e-6) in {ik_agree:.1%} (IK) and {fk_agree:.1%} (FK) of its poses from a fixed start")
 

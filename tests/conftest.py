@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
 
 import verne_post as vp
 from verne_post.api import Status, classify, pose_margins
+from verne_post.kinematics import kernels
 
 
 @pytest.fixture(scope="session")
@@ -38,3 +41,15 @@ def random_usable_joints(machine: vp.Machine, n: int, seed: int, tool_length: fl
         kept.append(joints[ok])
         total += int(ok.sum())
     return np.concatenate(kept)[:n]
+
+
+@pytest.fixture(params=["numba", "numpy"])
+def kinematics_route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """Each route of the working-mode kinematics in turn (verne_post.kinematics.kernels)."""
+    if request.param == "numba":
+        pytest.importorskip("numba")  # the test extra installs it
+    monkeypatch.setenv(kernels.ROUTE_VARIABLE, request.param)
+    kernels._numba_kernels.cache_clear()
+    assert kernels.route().split()[0] == request.param
+    yield request.param
+    kernels._numba_kernels.cache_clear()

@@ -1,8 +1,10 @@
-"""Kinematics against independent routes over thousands of random poses (seeded numpy)."""
+"""Kinematics against independent routes over thousands of random poses (seeded numpy), on each
+route of the working-mode kinematics (compiled loops and numpy)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import verne_post as vp
 from tests.conftest import random_usable_joints
@@ -19,6 +21,8 @@ from verne_post.kinematics import (
 )
 
 N_ROUND_TRIP = 10_000
+
+pytestmark = pytest.mark.usefixtures("kinematics_route")
 
 
 def _pair_of(alpha: np.ndarray, theta1: np.ndarray) -> np.ndarray:

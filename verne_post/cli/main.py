@@ -54,8 +54,20 @@ def _auto_offset(args: list[str]) -> list[str]:
 
 
 
+def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    """--version: the version and which kinematics route runs (compiled numba loops or numpy)."""
+    if not value or ctx.resilient_parsing:
+        return
+    from ..kinematics.kernels import route
+    from ..version import __version__
+
+    click.echo(f"verne-post, version {__version__}\nkinematics: {route()}")
+    ctx.exit()
+
+
 @click.group(cls=_DefaultToPost, context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="verne-post")
+@click.option("--version", is_flag=True, expose_value=False, is_eager=True, callback=_print_version,
+              help="Show the version and the kinematics route (numba or numpy), then exit.")
 def main() -> None:
     """Postprocessor for the VERNE 5-axis machine: CL data to joint-space G-code.
 

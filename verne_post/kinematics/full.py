@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import kernels
 from .geometry import Geometry
 from .module import (
     _module_fk_all,
@@ -26,12 +27,11 @@ from .module import (
     closure_ok,
     is_working_mode,
     solutions_for_alpha,
+    working_assembly_exact,
     working_sliders,
 )
+from .tolerances import POLE_EPS
 from .trigpoly import TrigPoly, real_half_angle_roots, roots_within
-
-#: Below this sin(phi1) the axis is taken as the table normal (theta2 from the caller).
-POLE_EPS = 1e-12
 
 
 def wrap_angle(angle: np.ndarray) -> np.ndarray:
@@ -178,6 +178,46 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     pair = np.broadcast_to(np.asarray(pair), (n,))
     # The caller's theta2 at the pole is a reading, like every joint out of here.
     theta2_at_pole = np.broadcast_to(_true_theta2(geom, theta2_at_pole), (n,))
+    g = geom
+    fast = kernels.ik_working(geom, tip, axis, pair, theta2_at_pole)
+    if fast is None:
+        fast = _newton_route(geom, tip, axis, pair, theta2_at_pole)
+    joints, alpha, phi, platform, coefficients, good, candidates = fast
+    xp, a, b, x1sq = coefficients.T
+    rho = joints[:, :3]
+    retry = np.flatnonzero(candidates)
+    if retry.size and exact_fallback:
+        # Newton found a root of eq. 31 in (-alpha_max, alpha_max) where a leg does not reach: if
+        # it is the only root there, no working solution exists and the all-solutions route (the
+        # sextic's eigenvalues, most of this function's time where poses are out of reach) would
+        # find none
+        residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
+        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
+                       & ~np.all(np.isfinite(rho[retry]), axis=-1))
+        if newton_root.any():
+            rows = retry[newton_root]
+            retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows], alpha[rows])])
+    if retry.size and exact_fallback:
+        exact = _machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
+        wm = exact.working_mode
+        order = np.lexsort((np.abs(exact.alpha[wm]), exact.pose_index[wm]))
+        found, first = np.unique(exact.pose_index[wm][order], return_index=True)
+        target = retry[found]
+        joints[target] = exact.joints[wm][order][first]
+        alpha[target] = exact.alpha[wm][order][first]
+        platform[target] = _platform_pose(geom, xp[target], a[target], b[target], alpha[target])
+        good[target] = True
+    bad = np.flatnonzero(~good)
+    joints[bad], alpha[bad], platform[bad, 1:] = np.nan, np.nan, np.nan
+    return MachineIK(geom.readings(joints), alpha, phi, platform, good)
+
+
+def _newton_route(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.ndarray, theta2_at_pole: np.ndarray
+                  ) -> tuple[np.ndarray, ...]:
+    """numpy route of :func:`machine_ik_working`'s fast part (its compiled twin: kernels.ik_working):
+    joints (N, 5) true positions (rho NaN where a leg does not reach), alpha (N,) rad, phi (N, 2)
+    rad, platform (N, 3) mm, (xP, A, B, X1^2) (N, 4), good (N,): a verified working solution, and
+    the candidates (N,) for the exact route: not good, leg I within reach, tip and axis finite."""
     phi1, phi2 = axis_angles(axis, pair, theta2_at_pole)
     xp, a, b = _platform_coefficients(geom, tip, axis, phi1, phi2)
     g = geom
@@ -201,32 +241,9 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
     good[good] = closure_ok(geom, platform[good], alpha[good], rho[good])
     joints = np.column_stack([rho, alpha - phi1, -phi2])
-    leg_one_reaches = x1sq <= k + two_rr
-    retry = np.flatnonzero(~good & leg_one_reaches & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1))
-    if retry.size and exact_fallback:
-        # Newton found a root of eq. 31 in (-alpha_max, alpha_max) where a leg does not reach: if
-        # it is the only root there, no working solution exists and the all-solutions route (the
-        # sextic's eigenvalues, most of this function's time where poses are out of reach) would
-        # find none
-        residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
-        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
-                       & ~np.all(np.isfinite(rho[retry]), axis=-1))
-        if newton_root.any():
-            rows = retry[newton_root]
-            retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows], alpha[rows])])
-    if retry.size and exact_fallback:
-        exact = _machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
-        wm = exact.working_mode
-        order = np.lexsort((np.abs(exact.alpha[wm]), exact.pose_index[wm]))
-        found, first = np.unique(exact.pose_index[wm][order], return_index=True)
-        target = retry[found]
-        joints[target] = exact.joints[wm][order][first]
-        alpha[target] = exact.alpha[wm][order][first]
-        good[target] = True
-    joints[~good] = np.nan
-    alpha = np.where(good, alpha, np.nan)
-    platform = _platform_pose(geom, xp, a, b, alpha)
-    return MachineIK(geom.readings(joints), alpha, np.column_stack([phi1, phi2]), platform, good)
+    candidates = ~good & (x1sq <= k + two_rr) & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1)
+    return (joints, alpha, np.column_stack([phi1, phi2]), platform, np.column_stack([xp, a, b, x1sq]), good,
+            candidates)
 
 
 @dataclass(frozen=True)
@@ -333,9 +350,17 @@ def machine_fk_working(geom: Geometry, joints: np.ndarray, alpha_guess: np.ndarr
     ``alpha_guess`` (rad): optional start for the platform tilt (see module_fk_working).
     """
     joints = geom.true_joints(np.atleast_2d(np.asarray(joints, dtype=float)))
-    module = _module_fk_working(geom, joints[:, :3], alpha_guess)
-    tip, axis = tool_pose(geom, module.platform, module.alpha, joints[:, 3], joints[:, 4])
-    return MachineFK(tip, axis, module.platform, module.alpha, module.reachable)
+    fast = kernels.fk_working(geom, joints, alpha_guess)
+    if fast is None:
+        module = _module_fk_working(geom, joints[:, :3], alpha_guess)
+        tip, axis = tool_pose(geom, module.platform, module.alpha, joints[:, 3], joints[:, 4])
+        return MachineFK(tip, axis, module.platform, module.alpha, module.reachable)
+    platform, alpha, good, tip, axis = fast
+    retry = np.flatnonzero(~good)
+    if retry.size:
+        platform[retry], alpha[retry] = working_assembly_exact(geom, joints[retry, :3])
+        tip[retry], axis[retry] = tool_pose(geom, platform[retry], alpha[retry], joints[retry, 3], joints[retry, 4])
+    return MachineFK(tip, axis, platform, alpha, np.isfinite(alpha))
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import kernels
 from .geometry import Geometry
 
 
@@ -210,6 +211,9 @@ def margins(geom: Geometry, joints: np.ndarray, platform: np.ndarray, alpha: np.
     """
     g = geom
     joints = g.true_joints(joints)
+    compiled = kernels.margins(geom, joints, platform, alpha)
+    if compiled is not None:
+        return Margins(*compiled.T)
     c, s = np.cos(alpha), np.sin(alpha)
     x, y, z = platform[:, 0], platform[:, 1], platform[:, 2]
     rho = joints[:, :3]

@@ -19,11 +19,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import kernels
 from .geometry import Geometry
+from .tolerances import CLOSURE_TOL
 from .trigpoly import TrigPoly, real_half_angle_roots
-
-#: Relative tolerance on the closure equations (eq. 2) for accepting a root, times L^2.
-CLOSURE_TOL = 1e-9
 
 
 def closure_residuals(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -469,6 +468,13 @@ def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray |
 
 def _module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None = None) -> ModuleFK:
     """:func:`module_fk_working` of true slider positions (N, 3) mm."""
+    compiled = kernels.fk_working(geom, rho, alpha_guess)
+    if compiled is not None:
+        platform, alpha, good = compiled[:3]
+        retry = np.flatnonzero(~good)
+        if retry.size:
+            platform[retry], alpha[retry] = working_assembly_exact(geom, rho[retry])
+        return ModuleFK(platform, alpha, np.isfinite(alpha))
     warm = alpha_guess is not None
     a0 = np.nan_to_num(np.asarray(alpha_guess, dtype=float)) if warm else np.zeros(rho.shape[0])
     a1 = a0 + (1e-4 if warm else 0.02)
@@ -493,14 +499,21 @@ def _module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray 
     platform[~good], alpha[~good] = np.nan, np.nan
     retry = np.flatnonzero(~good)
     if retry.size:
-        exact = _module_fk_all(geom, rho[retry])
-        found = exact.pose_index[exact.working_mode]
-        # Several working assemblies cannot occur in the reachable workspace; if they do,
-        # take the one with the smallest |alpha| (closest to the machine's home posture).
-        order = np.lexsort((np.abs(exact.alpha[exact.working_mode]), found))
-        found, first = np.unique(found[order], return_index=True)
-        target = retry[found]
-        platform[target] = exact.platform[exact.working_mode][order][first]
-        alpha[target] = exact.alpha[exact.working_mode][order][first]
+        platform[retry], alpha[retry] = working_assembly_exact(geom, rho[retry])
     reachable = np.isfinite(alpha)
     return ModuleFK(platform, alpha, reachable)
+
+
+def working_assembly_exact(geom: Geometry, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Platform (N, 3) mm and alpha (N,) rad of the working assembly of true slider positions
+    rho (N, 3) mm by the all-modes route (NaN where there is none): where the fast route fails."""
+    platform, alpha = np.full((len(rho), 3), np.nan), np.full(len(rho), np.nan)
+    exact = _module_fk_all(geom, rho)
+    found = exact.pose_index[exact.working_mode]
+    # Several working assemblies cannot occur in the reachable workspace; if they do,
+    # take the one with the smallest |alpha| (closest to the machine's home posture).
+    order = np.lexsort((np.abs(exact.alpha[exact.working_mode]), found))
+    found, first = np.unique(found[order], return_index=True)
+    platform[found] = exact.platform[exact.working_mode][order][first]
+    alpha[found] = exact.alpha[exact.working_mode][order][first]
+    return platform, alpha
