@@ -10,8 +10,10 @@ non-finite numbers.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import fields, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +28,8 @@ from verne_post.kinematics import (
     module_fk_working,
     wrap_angle,
 )
+from verne_post.options import PostOptions
+from verne_post.pipeline import post
 
 pytest.importorskip("numba")  # the test extra installs it
 
@@ -139,3 +143,30 @@ def test_non_finite_poses_and_joints_are_unreachable_on_both_routes(machine: vp.
     assert np.array_equal(numpy_route.reachable, numba_route.reachable)
     assert not numba_route.reachable[:2].any()
     assert np.isnan(numba_route.tip[2]).all() and np.isnan(numpy_route.tip[2]).all()
+
+
+def test_a_program_posted_on_the_compiled_route_has_the_same_axis_words(machine: vp.Machine, tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The swarf example posted and verified on both routes: every block's X Y Z A C words are the
+    same; the inverse-time feed words may move where a joint's last digit moves a planned time."""
+    example = Path(__file__).parent.parent / "examples" / "nx_swarf_inch_crlf.cls"
+    texts = []
+    for name in ("numpy", "numba"):
+        monkeypatch.setenv(kernels.ROUTE_VARIABLE, name)
+        kernels._numba_kernels.cache_clear()
+        output = tmp_path / f"{name}.nc"
+        posted = post(example, machine, PostOptions(workers=1), output)
+        assert not posted.violations and posted.verification is not None and posted.verification.ok
+        texts.append(output.read_text().splitlines())
+    kernels._numba_kernels.cache_clear()
+    numpy_lines, numba_lines = texts
+    assert len(numpy_lines) == len(numba_lines)
+    feed = re.compile(r" F([0-9.]+)")
+    moved = 0
+    for a, b in zip(numpy_lines, numba_lines, strict=True):
+        assert feed.sub("", a) == feed.sub("", b)
+        fa, fb = feed.search(a), feed.search(b)
+        if fa and fb and fa.group(1) != fb.group(1):
+            moved += 1
+            assert abs(float(fa.group(1)) / float(fb.group(1)) - 1.0) <= 1e-3
+    assert moved <= len(numpy_lines) // 50
