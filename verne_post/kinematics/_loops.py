@@ -48,7 +48,7 @@ def _turned(cos_a: float, sin_a: float, turn: float) -> tuple[float, float]:
 
 
 @_jit
-def _closure_and_mode(c, platform_x, platform_y, platform_z, alpha, cos_a, sin_a, rho1, rho2, rho3):
+def _closure_and_mode(c, platform_x, platform_y, platform_z, cos_a, sin_a, rho1, rho2, rho3):
     """module.closure_ok and module.is_working_mode of one pose (true slider positions)."""
     d1, d2, big_r1, r1, l1, big_r2, r4, l2, l3 = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8]
     x1, x2 = platform_x + d1, platform_x + d2
@@ -136,7 +136,7 @@ def _ik_working(c, tip, axis, pair, theta2_at_pole, joints, alpha_out, phi_out, 
             rho3 = platform_z + big_r2 * sa - math.sqrt(l3**2 - x2**2 - (platform_y + big_r2 * ca - r4) ** 2)
             ok = math.isfinite(rho1) and math.isfinite(rho2) and math.isfinite(rho3) and abs(alpha) < alpha_max
             if ok:
-                ok = _closure_and_mode(c, xp, platform_y, platform_z, alpha, ca, sa, rho1, rho2, rho3)
+                ok = _closure_and_mode(c, xp, platform_y, platform_z, ca, sa, rho1, rho2, rho3)
             joints[n, 0], joints[n, 1], joints[n, 2] = rho1, rho2, rho3
             joints[n, 3], joints[n, 4] = alpha - phi_out[n, 0], -phi_out[n, 1]
             alpha_out[n] = alpha
@@ -311,7 +311,7 @@ def _fk_working(c, joints, alpha_guess, warm, platform, alpha_out, good, tip, ax
         alpha = a1 if abs(a1) <= math.pi else math.atan2(sa, ca)
         ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
         if ok:
-            ok = _closure_and_mode(c, x, y, z, alpha, ca, sa, rho1, rho2, rho3)
+            ok = _closure_and_mode(c, x, y, z, ca, sa, rho1, rho2, rho3)
         if not ok:
             x, y, z, alpha = math.nan, math.nan, math.nan, math.nan
         platform[n, 0], platform[n, 1], platform[n, 2] = x, y, z

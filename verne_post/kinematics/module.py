@@ -469,12 +469,18 @@ def module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray |
 def _module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None = None) -> ModuleFK:
     """:func:`module_fk_working` of true slider positions (N, 3) mm."""
     compiled = kernels.fk_working(geom, rho, alpha_guess)
-    if compiled is not None:
-        platform, alpha, good = compiled[:3]
-        retry = np.flatnonzero(~good)
-        if retry.size:
-            platform[retry], alpha[retry] = working_assembly_exact(geom, rho[retry])
-        return ModuleFK(platform, alpha, np.isfinite(alpha))
+    platform, alpha, good = _secant_route(geom, rho, alpha_guess) if compiled is None else compiled[:3]
+    retry = np.flatnonzero(~good)
+    if retry.size:
+        platform[retry], alpha[retry] = working_assembly_exact(geom, rho[retry])
+    return ModuleFK(platform, alpha, np.isfinite(alpha))
+
+
+def _secant_route(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """numpy route of :func:`module_fk_working`'s secant iteration (its compiled twin:
+    kernels.fk_working): platform (N, 3) mm, alpha (N,) rad and good (N,), a verified working
+    assembly (NaN where not), for true slider positions rho (N, 3) mm."""
     warm = alpha_guess is not None
     a0 = np.nan_to_num(np.asarray(alpha_guess, dtype=float)) if warm else np.zeros(rho.shape[0])
     a1 = a0 + (1e-4 if warm else 0.02)
@@ -497,11 +503,7 @@ def _module_fk_working(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray 
         geom, platform[good], alpha[good], rho[good]
     )
     platform[~good], alpha[~good] = np.nan, np.nan
-    retry = np.flatnonzero(~good)
-    if retry.size:
-        platform[retry], alpha[retry] = working_assembly_exact(geom, rho[retry])
-    reachable = np.isfinite(alpha)
-    return ModuleFK(platform, alpha, reachable)
+    return platform, alpha, good
 
 
 def working_assembly_exact(geom: Geometry, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
