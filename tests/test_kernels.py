@@ -129,6 +129,7 @@ def test_the_compiled_fk_gives_the_numpy_routes_poses(machine: vp.Machine, monke
             _assert_close(numpy_route, numba_route, usable)
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")  # the numpy route on NaN and inf
 def test_non_finite_poses_and_joints_are_unreachable_on_both_routes(machine: vp.Machine,
                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     geom = machine.kinematic_geometry(0.0)
