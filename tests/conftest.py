@@ -53,3 +53,12 @@ def kinematics_route(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyP
     assert kernels.route().split()[0] == request.param
     yield request.param
     kernels._numba_kernels.cache_clear()
+
+
+@pytest.fixture(autouse=True)
+def _no_kinematics_route_left_behind() -> Iterator[None]:
+    """A test that switches the kinematics route (VERNE_POST_KERNELS through monkeypatch) leaves no
+    cached route behind: after monkeypatch has restored the environment (autouse fixtures are torn
+    down last), the next test reads the route afresh."""
+    yield
+    kernels._numba_kernels.cache_clear()
