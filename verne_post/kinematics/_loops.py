@@ -12,6 +12,7 @@ import math
 import numba
 import numpy as np
 
+from .adjugate import fill_adjugate
 from .tolerances import CLOSURE_TOL, POLE_EPS
 
 NUMBA_VERSION = str(numba.__version__)
@@ -146,38 +147,7 @@ def _ik_working(c, tip, axis, pair, theta2_at_pole, joints, alpha_out, phi_out, 
                 tip[n, 0] + tip[n, 1] + tip[n, 2] + axis[n, 0] + axis[n, 1] + axis[n, 2]))
 
 
-@_jit
-def _adjugate4(a, adj):
-    """jacobian._adjugate4 of one 4 x 4 matrix: fills ``adj``, returns the determinant."""
-    s0 = a[0, 0] * a[1, 1] - a[1, 0] * a[0, 1]
-    s1 = a[0, 0] * a[1, 2] - a[1, 0] * a[0, 2]
-    s2 = a[0, 0] * a[1, 3] - a[1, 0] * a[0, 3]
-    s3 = a[0, 1] * a[1, 2] - a[1, 1] * a[0, 2]
-    s4 = a[0, 1] * a[1, 3] - a[1, 1] * a[0, 3]
-    s5 = a[0, 2] * a[1, 3] - a[1, 2] * a[0, 3]
-    c5 = a[2, 2] * a[3, 3] - a[3, 2] * a[2, 3]
-    c4 = a[2, 1] * a[3, 3] - a[3, 1] * a[2, 3]
-    c3 = a[2, 1] * a[3, 2] - a[3, 1] * a[2, 2]
-    c2 = a[2, 0] * a[3, 3] - a[3, 0] * a[2, 3]
-    c1 = a[2, 0] * a[3, 2] - a[3, 0] * a[2, 2]
-    c0 = a[2, 0] * a[3, 1] - a[3, 0] * a[2, 1]
-    adj[0, 0] = a[1, 1] * c5 - a[1, 2] * c4 + a[1, 3] * c3
-    adj[0, 1] = -a[0, 1] * c5 + a[0, 2] * c4 - a[0, 3] * c3
-    adj[0, 2] = a[3, 1] * s5 - a[3, 2] * s4 + a[3, 3] * s3
-    adj[0, 3] = -a[2, 1] * s5 + a[2, 2] * s4 - a[2, 3] * s3
-    adj[1, 0] = -a[1, 0] * c5 + a[1, 2] * c2 - a[1, 3] * c1
-    adj[1, 1] = a[0, 0] * c5 - a[0, 2] * c2 + a[0, 3] * c1
-    adj[1, 2] = -a[3, 0] * s5 + a[3, 2] * s2 - a[3, 3] * s1
-    adj[1, 3] = a[2, 0] * s5 - a[2, 2] * s2 + a[2, 3] * s1
-    adj[2, 0] = a[1, 0] * c4 - a[1, 1] * c2 + a[1, 3] * c0
-    adj[2, 1] = -a[0, 0] * c4 + a[0, 1] * c2 - a[0, 3] * c0
-    adj[2, 2] = a[3, 0] * s4 - a[3, 1] * s2 + a[3, 3] * s0
-    adj[2, 3] = -a[2, 0] * s4 + a[2, 1] * s2 - a[2, 3] * s0
-    adj[3, 0] = -a[1, 0] * c3 + a[1, 1] * c1 - a[1, 2] * c0
-    adj[3, 1] = a[0, 0] * c3 - a[0, 1] * c1 + a[0, 2] * c0
-    adj[3, 2] = -a[3, 0] * s3 + a[3, 1] * s1 - a[3, 2] * s0
-    adj[3, 3] = a[2, 0] * s3 - a[2, 1] * s1 + a[2, 2] * s0
-    return s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+_adjugate4 = _jit(fill_adjugate)
 
 
 @_jit

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import kernels
+from .adjugate import fill_adjugate
 from .geometry import Geometry
 
 
@@ -154,35 +155,10 @@ class Margins:
 
 
 def _adjugate4(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(adjugate, determinant) of 4 x 4 matrices stored entry-first: ``a[i, j]`` is an (N,) array.
-
-    Expansion by complementary 2 x 2 minors, elementwise over N: far cheaper than a LAPACK
-    call per 4 x 4 matrix. The adjugate comes back entry-first too (4, 4, N).
-    """
-    s0 = a[0, 0] * a[1, 1] - a[1, 0] * a[0, 1]
-    s1 = a[0, 0] * a[1, 2] - a[1, 0] * a[0, 2]
-    s2 = a[0, 0] * a[1, 3] - a[1, 0] * a[0, 3]
-    s3 = a[0, 1] * a[1, 2] - a[1, 1] * a[0, 2]
-    s4 = a[0, 1] * a[1, 3] - a[1, 1] * a[0, 3]
-    s5 = a[0, 2] * a[1, 3] - a[1, 2] * a[0, 3]
-    c5 = a[2, 2] * a[3, 3] - a[3, 2] * a[2, 3]
-    c4 = a[2, 1] * a[3, 3] - a[3, 1] * a[2, 3]
-    c3 = a[2, 1] * a[3, 2] - a[3, 1] * a[2, 2]
-    c2 = a[2, 0] * a[3, 3] - a[3, 0] * a[2, 3]
-    c1 = a[2, 0] * a[3, 2] - a[3, 0] * a[2, 2]
-    c0 = a[2, 0] * a[3, 1] - a[3, 0] * a[2, 1]
-    det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
-    adj = np.array([
-        [a[1, 1] * c5 - a[1, 2] * c4 + a[1, 3] * c3, -a[0, 1] * c5 + a[0, 2] * c4 - a[0, 3] * c3,
-         a[3, 1] * s5 - a[3, 2] * s4 + a[3, 3] * s3, -a[2, 1] * s5 + a[2, 2] * s4 - a[2, 3] * s3],
-        [-a[1, 0] * c5 + a[1, 2] * c2 - a[1, 3] * c1, a[0, 0] * c5 - a[0, 2] * c2 + a[0, 3] * c1,
-         -a[3, 0] * s5 + a[3, 2] * s2 - a[3, 3] * s1, a[2, 0] * s5 - a[2, 2] * s2 + a[2, 3] * s1],
-        [a[1, 0] * c4 - a[1, 1] * c2 + a[1, 3] * c0, -a[0, 0] * c4 + a[0, 1] * c2 - a[0, 3] * c0,
-         a[3, 0] * s4 - a[3, 1] * s2 + a[3, 3] * s0, -a[2, 0] * s4 + a[2, 1] * s2 - a[2, 3] * s0],
-        [-a[1, 0] * c3 + a[1, 1] * c1 - a[1, 2] * c0, a[0, 0] * c3 - a[0, 1] * c1 + a[0, 2] * c0,
-         -a[3, 0] * s3 + a[3, 1] * s1 - a[3, 2] * s0, a[2, 0] * s3 - a[2, 1] * s1 + a[2, 2] * s0],
-    ])
-    return adj, det
+    """(adjugate, determinant) of 4 x 4 matrices stored entry-first: ``a[i, j]`` is an (N,) array;
+    the adjugate comes back entry-first too (4, 4, N)."""
+    adj = np.empty(np.shape(a))
+    return adj, fill_adjugate(a, adj)
 
 
 def _inverse_condition(matrix: np.ndarray, adj: np.ndarray, det: np.ndarray) -> np.ndarray:
