@@ -98,15 +98,33 @@ def test_the_impeller_example_is_placed_and_runs() -> None:
     assert code == 0, err
 
 
-def test_work_offset_auto_is_recorded_in_the_gcode_header(tmp_path: Path, placed: dict) -> None:
-    out = tmp_path / "part.nc"
-    code, _, err = run("post", str(REAL), "--tool-length", TOOL, "--work-offset", "auto", "-o", str(out), "-q")
+@pytest.mark.parametrize("room", [False, True])
+def test_work_offset_auto_is_recorded_in_the_gcode_header(tmp_path: Path, placed: dict, room: bool) -> None:
+    """The offset 'place' finds, and with --room the room it reports (else a line saying it was
+    not measured, never a room no full check confirmed)."""
+    out, page = tmp_path / "part.nc", tmp_path / "part.html"
+    code, _, err = run("post", str(REAL), "--tool-length", TOOL, "--work-offset", "auto", *(["--room"] * room),
+                       "-o", str(out), "--report", str(page), "-q")
     assert code == 0, err
     text = out.read_text()
+    assert bool(re.search(r"room x -[\d.]+/\+[\d.]+, y", page.read_text())) == room
+    assert ("room not measured" in page.read_text()) != room
     x, y, z = (float(v) for v in re.search(r"\(WORK OFFSET (\S+) (\S+) (\S+) MM", text).groups())
     assert np.allclose([x, y, z], placed["work_offset_mm"], atol=1e-3)  # deterministic: the same as 'place'
     assert "WORK OFFSET CHOSEN BY VERNE-POST PLACE" in text
-    assert re.search(r"PART MAY MOVE BY X -[\d.]+/\+[\d.]+ Y -[\d.]+/\+[\d.]+ Z -[\d.]+/\+[\d.]+ MM", text)
+    moves = re.search(r"PART MAY MOVE BY X -(\S+)/\+(\S+) Y -(\S+)/\+(\S+) Z -(\S+)/\+(\S+) MM", text)
+    if room:
+        expected = [placed["room_mm"][a][side] for a in "xyz" for side in ("minus", "plus")]
+        assert np.allclose([float(v) for v in moves.groups()], expected, atol=0.051)  # printed to 0.1 mm
+    else:
+        assert moves is None and "ROOM AROUND IT NOT MEASURED" in text
+
+
+def test_room_without_an_automatic_offset_is_a_one_line_error(tmp_path: Path) -> None:
+    out = tmp_path / "part.nc"
+    code, _, err = run("post", str(REAL), "--tool-length", TOOL, "--room", "-o", str(out), "-q")
+    assert code == 2 and not out.exists()
+    assert err.count("\n") == 1 and "--work-offset auto" in err
 
 
 def test_first_failure_gives_the_verdict_of_the_full_checks() -> None:

@@ -26,6 +26,8 @@ class PostOptions:
 
     # Part zero in the table frame, mm; None: the machine file's; "auto": found by verne_post.placement.search.
     work_offset: tuple[float, float, float] | Literal["auto"] | None = None
+    # with work_offset "auto": also the room around the offset (verne_post.placement.search.place)
+    placement_room: bool = False
     tool_length: float | None = None  # mm, for tools whose length nothing else gives
     units: Literal["mm", "inch"] | None = None  # override the CL file's units
     tol: float = 0.005  # mm: tool tip deviation from the CL path between blocks

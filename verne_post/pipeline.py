@@ -375,7 +375,7 @@ def _machine_poses(path: str | Path, machine: Machine, options: PostOptions, clo
     if options.work_offset == "auto":
         zero = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=options.tool_length,
                              setup=setup)
-        placement = place(machine, zero, options, progress=clock.progress)
+        placement = place(machine, zero, options, progress=clock.progress, room=options.placement_room)
         options = replace(options, work_offset=placement.offset)
         clock.lap("placement")
     poses = machine_poses(toolpath, machine, work_offset=work_offset_in_force(machine, options),

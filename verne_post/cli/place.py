@@ -58,7 +58,7 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length,
                           setup=setup_of(machine, options, toolpath.units))
     with progress_bar(PLACEMENT_STEPS, quiet) as tick:
-        placement = place(machine, poses, options, progress=lambda stage: tick())
+        placement = place(machine, poses, options, progress=lambda stage: tick(), room=True)
     if report_path:
         write_json(report_path, {"source": toolpath.source, "machine": machine.source, **placement.to_dict()})
     if not placement.feasible:
@@ -69,7 +69,7 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     x, y, z = placement.offset
     click.echo(f"work offset {x:.3f} {y:.3f} {z:.3f} mm (part zero in the table frame)")
     click.echo(f"smallest headroom {placement.margin:.3f} ({placement.limit}) at {toolpath.source}:{placement.line}")
-    for axis, (minus, plus) in zip("XYZ", placement.room, strict=True):
+    for axis, (minus, plus) in zip("XYZ", placement.room or (), strict=True):
         click.echo(f"room {axis} -{minus:.2f} / +{plus:.2f} mm")
     if not quiet:
         click.echo(f"verne-post: {placement.screened} offsets screened, {placement.seconds:.1f} s", err=True)

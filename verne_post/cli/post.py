@@ -25,6 +25,9 @@ def options_from(no_timing: bool, auto_offset: bool, **choices: Any) -> Any:
 
     if auto_offset and choices["work_offset"]:
         raise InputError("give --work-offset either as X Y Z or as auto, once")
+    if choices.get("placement_room") and not auto_offset:
+        raise InputError("--room measures the room around an offset placement finds: give it with "
+                         "--work-offset auto (or run 'verne-post place')")
     offset = "auto" if auto_offset else choices["work_offset"] or None
     setup = setup_file(choices.pop("setup_path", None))
     return PostOptions(**{**choices, "work_offset": offset}, plan=not no_timing, **setup)

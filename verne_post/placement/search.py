@@ -64,7 +64,9 @@ class Placement:
     margin: float  # smallest headroom over the program (0 at a limit, 1 as far as the machine gets)
     limit: str  # the constraint with that smallest headroom
     line: int  # CL line where it occurs
-    room: tuple[tuple[float, float], ...]  # per x, y, z: how far the part may move towards - and + (mm)
+    # per x, y, z: how far the part may move towards - and + (mm); None where not asked for (the
+    # room certifies every distance with the full checks: about 40 of them on the impeller)
+    room: tuple[tuple[float, float], ...] | None
     reason: str  # why no offset works ("" when feasible)
     screened: int  # candidate offsets screened
     seconds: float
@@ -79,18 +81,21 @@ class Placement:
             "smallest_headroom": self.margin,
             "limiting_constraint": self.limit,
             "line": self.line,
-            "room_mm": {axis: {"minus": lo, "plus": hi} for axis, (lo, hi) in zip(AXES, self.room, strict=True)},
+            "room_mm": None if self.room is None else {axis: {"minus": lo, "plus": hi}
+                                                       for axis, (lo, hi) in zip(AXES, self.room, strict=True)},
             "reason": self.reason or None,
             "offsets_screened": self.screened,
             "seconds": self.seconds,
         }
 
     def header(self) -> tuple[str, ...]:
-        """G-code header lines: how the offset was chosen and the room around it."""
+        """G-code header lines: how the offset was chosen and the room around it (where found)."""
+        chosen = (f"WORK OFFSET CHOSEN BY VERNE-POST PLACE FOR THE MOST HEADROOM TO EVERY LIMIT: SMALLEST "
+                  f"{self.margin:.3f} AT CL LINE {self.line}, {self.limit.upper()}")
+        if self.room is None:
+            return chosen, "ROOM AROUND IT NOT MEASURED ('VERNE-POST PLACE' OR --ROOM MEASURES IT)"
         room = " ".join(f"{a.upper()} -{lo:.1f}/+{hi:.1f}" for a, (lo, hi) in zip(AXES, self.room, strict=True))
-        return (f"WORK OFFSET CHOSEN BY VERNE-POST PLACE FOR THE MOST HEADROOM TO EVERY LIMIT: SMALLEST "
-                f"{self.margin:.3f} AT CL LINE {self.line}, {self.limit.upper()}",
-                f"PART MAY MOVE BY {room} MM AND STILL RUN")
+        return chosen, f"PART MAY MOVE BY {room} MM AND STILL RUN"
 
 
 # ----------------------------------------------------------------------------- screening
@@ -612,11 +617,14 @@ def _search(machine: Machine, poses: MachinePoses, options: PostOptions, tick: C
 
 
 def place(machine: Machine, poses: MachinePoses, options: PostOptions,
-          progress: Callable[[str], None] = lambda stage: None) -> Placement:
+          progress: Callable[[str], None] = lambda stage: None, room: bool = True) -> Placement:
     """The work offset (mm, part zero in the table frame) where the whole program runs with the
     largest smallest headroom; ``poses`` are the program's poses at work offset 0 0 0.
 
-    ``progress`` is called after each step (some 20 to 40 calls) with a short stage name.
+    ``room``: also how far the part may move from it and still run (step 3 of the module
+    docstring: most of the time, as every distance it reports is certified by the full checks;
+    without it, ``Placement.room`` is None). ``progress`` is called after each step (some 5
+    calls, 20 to 40 with the room) with a short stage name.
     """
     clock = time.perf_counter()
     offset, verdict, points, rows, screened = _search(machine, poses, options, progress)
@@ -630,9 +638,10 @@ def place(machine: Machine, poses: MachinePoses, options: PostOptions,
         reason = (f"at the best offset found, line {collisions[0].line}: {collisions[0].message}" if collisions
                   else diagnose(machine, poses, options, verdict))
         return Placement(tuple(float(v) for v in offset), False, verdict.margin, verdict.limit, line,
-                         ((0.0, 0.0),) * 3, reason, screened, time.perf_counter() - clock, collisions)
-    room = _room(machine, poses, points, rows, offset, options, lambda: progress("room"), verdict.checked)
-    return Placement(tuple(float(v) for v in offset), True, verdict.margin, verdict.limit, line, room, "",
+                         ((0.0, 0.0),) * 3 if room else None, reason, screened, time.perf_counter() - clock, collisions)
+    found = _room(machine, poses, points, rows, offset, options, lambda: progress("room"), verdict.checked) \
+        if room else None
+    return Placement(tuple(float(v) for v in offset), True, verdict.margin, verdict.limit, line, found, "",
                      screened, time.perf_counter() - clock)
 
 

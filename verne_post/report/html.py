@@ -206,10 +206,11 @@ def render(machine: Machine, options: PostOptions, result: PostResult, scene: di
     placement = report["placement"]
     offset_text = "{:.3f} {:.3f} {:.3f} mm".format(*offset)
     if placement:
-        room = ", ".join(f"{a} -{r['minus']:.1f}/+{r['plus']:.1f}" for a, r in placement["room_mm"].items())
+        room = "not measured" if placement["room_mm"] is None else ", ".join(
+            f"{a} -{r['minus']:.1f}/+{r['plus']:.1f}" for a, r in placement["room_mm"].items()) + " mm"
         offset_text += (f" (chosen by placement: smallest headroom {placement['smallest_headroom']:.3f}, "
                         f"{html.escape(placement['limiting_constraint'])} at <a href=\"#cl-{placement['line']}\">"
-                        f"line {placement['line']}</a>; room {room} mm)")
+                        f"line {placement['line']}</a>; room {room})")
         named.add(placement["line"])
     tools = "".join(f"<tr><td>{t['tool']}</td><td>{t['length_mm']:g}</td><td>{t['delta_mm']:g}</td>"
                     f"<td><a href=\"#cl-{t['line']}\">{t['line']}</a></td><td>{html.escape(t['length_from'])}</td></tr>"
