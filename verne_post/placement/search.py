@@ -238,6 +238,20 @@ def _score(room: np.ndarray, overhang: np.ndarray | None = None) -> np.ndarray:
     return score if overhang is None else np.where(overhang > 0, -1.0 - overhang / 1e4, score)
 
 
+def _scores(machine: Machine, screen: _Points, offsets: np.ndarray, seat: _Seat | None) -> np.ndarray:
+    """:func:`_score` of offsets (K, 3) mm on ``screen``; the kinematics only where the part
+    sits on the table (an overhang alone scores an offset: most of the coarse grid over the
+    machine's reach puts the part beside the table)."""
+    if seat is None:
+        return _score(_screen_headroom(machine, screen, offsets))
+    overhang = seat.overhang(offsets)
+    score = -1.0 - overhang / 1e4
+    on = np.flatnonzero(overhang <= 0)
+    if on.size:
+        score[on] = _score(_screen_headroom(machine, screen, offsets[on]))
+    return score
+
+
 @dataclass(frozen=True)
 class _Seat:
     """The part's footprint (mm, part frame: the setup's box, else the feed points') and the
@@ -304,12 +318,11 @@ def _pattern_search(machine: Machine, coarse: _Points, fine: _Points, starts: np
     steps = np.full(len(current), step)
     evaluations = 0
     for screen, smallest_step in ((coarse, FINE_FROM), (fine, FINEST_STEP)):
-        score = _score(_screen_headroom(machine, screen, current), None if seat is None else seat.overhang(current))
+        score = _scores(machine, screen, current, seat)
         while np.any(steps >= smallest_step):
             active = np.flatnonzero(steps >= smallest_step)
             trial = (current[active, None] + steps[active, None, None] * _DIRECTIONS[None]).reshape(-1, 3)
-            scores = _score(_screen_headroom(machine, screen, trial),
-                            None if seat is None else seat.overhang(trial)).reshape(len(active), -1)
+            scores = _scores(machine, screen, trial, seat).reshape(len(active), -1)
             evaluations += len(trial)
             best = np.argmax(scores, axis=1)
             better = scores[np.arange(len(active)), best] > score[active] + IMPROVEMENT
@@ -590,8 +603,7 @@ def _search(machine: Machine, poses: MachinePoses, options: PostOptions, tick: C
     counts = np.array([9, 9, 7])
     grid = _grid(lower, upper, counts)
     seat = _Seat.of(machine, poses)
-    scores = _score(_screen_headroom(machine, points.screen(coarse_rows), grid),
-                    None if seat is None else seat.overhang(grid))
+    scores = _scores(machine, points.screen(coarse_rows), grid, seat)
     screened = len(grid)
     tick("coarse grid")
     step = float(np.max((upper - lower) / (counts - 1))) / 2.0
