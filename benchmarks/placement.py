@@ -1,5 +1,6 @@
 """`verne-post place` on the impeller example (36,000 CL poses) on one core, stage by stage, next to
-one full `check --no-timing` of the same program in the same run.
+one full `check --no-timing` of the same program in the same run; and the command itself (which
+runs the room's full checks of different directions side by side on as many cores as it has).
 
     python -m benchmarks.placement [--cl examples/impeller_5axis.cls] [--post 3]
 
@@ -83,7 +84,9 @@ def main() -> None:
 
     placement.check_poses = timed_check
     try:
-        found = placement.place(machine, zero, PostOptions(plan=False), progress=progress)
+        # one process, so that every full check is counted here (the command runs the room's
+        # checks of different directions side by side, up to its workers)
+        found = placement.place(machine, zero, PostOptions(plan=False, workers=1), progress=progress)
     finally:
         placement.check_poses = full_check
 

@@ -25,6 +25,7 @@ from verne_post.planning import stage
 from verne_post.planning.feed_planner import Cubics
 from verne_post.planning.schedule import SequenceError
 from verne_post.planning.timing import Limits, plan_rapid
+from verne_post.processes.helpers import Pool
 from verne_post.verify.verifier import Verifier
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
@@ -158,3 +159,35 @@ def test_a_rapid_plan_crosses_processes() -> None:
             np.testing.assert_array_equal(ours, theirs)
     still = pickle.loads(pickle.dumps(plan_rapid(start, start, limits)))
     assert still.duration == 0.0 and still.trajectory is None
+
+
+def _power_and_pid(context: np.ndarray, k: int) -> tuple[np.ndarray, int]:
+    if k < 0:
+        raise ValueError(f"test: call {k} fails")
+    return np.linalg.matrix_power(context, k), os.getpid()
+
+
+def test_a_pool_gives_what_one_process_gives_in_order_and_raises_what_a_call_raised() -> None:
+    """Pool (placement's room runs its full checks in one): each call's result, bit for bit and in
+    the order of the calls, whichever process ran it; the context is the forked processes' own
+    (inherited, not passed); a call that raises raises in the caller."""
+    rng = np.random.default_rng(7)
+    context = rng.normal(size=(6, 6)) / 3.0
+    calls = [(k,) for k in range(1, 9)]
+    alone = forked = None
+    try:
+        alone = Pool(context, 1)
+        forked = Pool(context, 2)
+        here = alone.map(_power_and_pid, calls)
+        there = forked.map(_power_and_pid, calls)
+        assert {pid for _, pid in here} == {os.getpid()}
+        assert os.getpid() not in {pid for _, pid in there}
+        for (a, _), (b, _), (k,) in zip(here, there, calls, strict=True):
+            assert np.array_equal(a, b)
+            assert np.allclose(a, np.linalg.matrix_power(context, k))
+        with pytest.raises(ValueError, match="call -1 fails"):
+            forked.map(_power_and_pid, [(2,), (-1,)])
+    finally:
+        for pool in (alone, forked):
+            if pool is not None:
+                pool.close()

@@ -21,6 +21,7 @@ from verne_post.cl import read_toolpath
 from verne_post.cli import main
 from verne_post.motion.poses import machine_poses
 from verne_post.options import PostOptions
+from verne_post.placement import search
 from verne_post.placement.search import place
 
 DATA = Path(__file__).parent / "data"
@@ -269,3 +270,25 @@ def test_check_with_an_automatic_offset_fails_with_the_placement_reason_only(tmp
     assert len(errors) == 1 and "no work offset lets the whole program run" in errors[0]
     assert placed.split("run: ", 1)[1].strip() in errors[0]  # the reason place gives
     assert "more violations" not in err
+
+
+def test_the_room_checked_in_processes_is_the_room_checked_in_one(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The room's full checks of different directions run side by side in forked processes: the
+    same offset and room as in one process, with fewer of the checks in this one."""
+    machine = vp.load_machine()
+    zero = machine_poses(read_toolpath(REAL), machine, work_offset=(0, 0, 0), tool_length=float(TOOL))
+    here = []
+    real = search.check_poses
+
+    def counted(*args: object, **kwargs: object) -> object:
+        here.append(1)  # a forked process counts in its own copy
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(search, "check_poses", counted)
+    found = {}
+    for workers in (1, 2):
+        here.clear()
+        placement = place(machine, zero, PostOptions(tool_length=float(TOOL), plan=False, workers=workers))
+        found[workers] = (placement.offset, placement.room, placement.margin, len(here))
+    assert found[1][:3] == found[2][:3]
+    assert found[2][3] < found[1][3]

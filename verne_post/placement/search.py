@@ -42,6 +42,7 @@ from ..machine import Machine
 from ..motion.branch import solve_path
 from ..motion.poses import MachinePoses
 from ..options import PostOptions
+from ..processes.helpers import Pool
 
 AXES = "xyz"
 #: Room is found to this resolution (mm); the reported room is the last distance that runs.
@@ -505,7 +506,9 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
     join the first and the failing lines' ends the second, and the bisection runs again below;
     what the screens still cannot see (a block's joint-space line, a cut that needs both angle
     pairs) is then bisected with the full checks themselves: the room is the room of everything
-    the post checks, the bodies included.
+    the post checks, the bodies included. The full checks of different directions run side by
+    side in up to ``options.workers`` processes (each direction's own checks in turn, as in one
+    process: the same room).
     """
     directions = np.repeat(np.eye(3), 2, axis=0) * np.tile([-1.0, 1.0], 3)[:, None]
     inside = np.zeros(6)  # farthest distance known to run (full checks)
@@ -513,60 +516,89 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
     failed_at = np.full(6, ROOM_LIMIT)  # nearest distance a full check failed at
     pending = np.arange(6)
     ends = None if chosen is None else _Ends.of(machine, poses, chosen, offset)
+    checks = Pool((machine, poses, options), options.workers)
 
-    def runs(distance: float, d: int) -> bool:
-        return _confirm(machine, poses, offset + distance * directions[d], options)[0] is None
-
-    def bisect_fully(d: int) -> None:
-        """Bisect direction ``d`` with the full checks themselves."""
-        while outside[d] - inside[d] > 2 * ROOM_RESOLUTION:
-            middle = (inside[d] + outside[d]) / 2.0
-            if runs(middle, d):
-                inside[d] = middle
-            else:
-                outside[d] = failed_at[d] = middle
+    def bisect_fully(which: list[int]) -> None:
+        """Bisect the directions ``which`` with the full checks themselves."""
+        found = checks.map(_bisect_fully, [(offset, directions[d], inside[d], outside[d], failed_at[d])
+                                           for d in which])
+        for d, bracket in zip(which, found, strict=True):
+            inside[d], outside[d], failed_at[d] = bracket
             tick()
 
-    for round_ in range(ROUNDS):
-        screen = points.screen(rows)
-        lo, hi = _bisect(machine, screen, offset, directions[pending], inside[pending], outside[pending],
-                         None if ends is None else partial(ends.fail, machine, poses))
-        outside[pending] = hi
-        tick()
-        failed = []
-        for k, d in enumerate(pending):
-            at = offset + lo[k] * directions[d]
-            worst, screenable, failing = _confirm(machine, poses, at, options)
+    try:
+        for round_ in range(ROUNDS):
+            screen = points.screen(rows)
+            lo, hi = _bisect(machine, screen, offset, directions[pending], inside[pending], outside[pending],
+                             None if ends is None else partial(ends.fail, machine, poses))
+            outside[pending] = hi
             tick()
-            if worst is None:
-                inside[d] = lo[k]
-                continue
-            outside[d] = failed_at[d] = lo[k]
-            grown = np.union1d(rows, worst)
-            # the failing ends can join the screen where it sees them fail here and not where the
-            # program runs (ends that do not follow the part, near home, may fail anywhere else)
-            seen = failing is not None and np.array_equal(
-                failing.fail(machine, poses, np.array([at, offset + inside[d] * directions[d]])), [True, False])
-            if round_ < ROUNDS - 1 and (seen or (screenable and len(grown) > len(rows))):
-                if seen:  # the failing ends (where the screens did not look) join the screen of ends
-                    ends = failing if ends is None else ends.then(failing)
-                rows = grown
-                failed.append(d)
-                continue
-            bisect_fully(d)  # what the screens cannot see
-        pending = np.array(failed, dtype=int)
-        if not pending.size:
-            break
-    if ends is not None and ends.between.any():
-        # the moves between cuts' ends follow the part only roughly: where the screen's edge may be
-        # theirs, the full checks confirm that it fails there, else bisect on with them
-        for d in np.flatnonzero(outside < failed_at):
-            if runs(outside[d], d):
-                inside[d], outside[d] = outside[d], failed_at[d]
-                bisect_fully(d)
-            tick()
+            failed, unseen = [], []
+            confirmed = checks.map(_confirm_at, [(offset + lo[k] * directions[d],) for k, d in enumerate(pending)])
+            for k, d in enumerate(pending):
+                at = offset + lo[k] * directions[d]
+                worst, screenable, failing = confirmed[k]
+                tick()
+                if worst is None:
+                    inside[d] = lo[k]
+                    continue
+                outside[d] = failed_at[d] = lo[k]
+                grown = np.union1d(rows, worst)
+                # the failing ends can join the screen where it sees them fail here and not where the
+                # program runs (ends that do not follow the part, near home, may fail anywhere else)
+                seen = failing is not None and np.array_equal(
+                    failing.fail(machine, poses, np.array([at, offset + inside[d] * directions[d]])), [True, False])
+                if round_ < ROUNDS - 1 and (seen or (screenable and len(grown) > len(rows))):
+                    if seen:  # the failing ends (where the screens did not look) join the screen of ends
+                        ends = failing if ends is None else ends.then(failing)
+                    rows = grown
+                    failed.append(d)
+                    continue
+                unseen.append(d)  # what the screens cannot see
+            bisect_fully(unseen)
+            pending = np.array(failed, dtype=int)
+            if not pending.size:
+                break
+        if ends is not None and ends.between.any():
+            # the moves between cuts' ends follow the part only roughly: where the screen's edge may be
+            # theirs, the full checks confirm that it fails there, else bisect on with them
+            edges = np.flatnonzero(outside < failed_at)
+            verdicts = checks.map(_confirm_at, [(offset + outside[d] * directions[d],) for d in edges])
+            running = []
+            for d, (worst, _, _) in zip(edges, verdicts, strict=True):
+                if worst is None:
+                    inside[d], outside[d] = outside[d], failed_at[d]
+                    running.append(int(d))
+                tick()
+            bisect_fully(running)
+    finally:
+        checks.close()
     return tuple((float(np.floor(inside[2 * a] * 100) / 100), float(np.floor(inside[2 * a + 1] * 100) / 100))
                  for a in range(3))
+
+
+_Context = tuple[Machine, MachinePoses, PostOptions]
+
+
+def _confirm_at(context: _Context, offset: np.ndarray) -> tuple[np.ndarray | None, bool, _Ends | None]:
+    """:func:`_confirm` at ``offset`` (mm) of the room's program (a :class:`Pool` call)."""
+    machine, poses, options = context
+    return _confirm(machine, poses, offset, options)
+
+
+def _bisect_fully(context: _Context, offset: np.ndarray, direction: np.ndarray, inside: float, outside: float,
+                  failed_at: float) -> tuple[float, float, float]:
+    """Bisect the distance along ``direction`` from ``offset`` (mm) between ``inside`` (runs) and
+    ``outside`` (fails) with the full checks to 2 ROOM_RESOLUTION: the new (inside, outside,
+    nearest distance a full check failed at)."""
+    machine, poses, options = context
+    while outside - inside > 2 * ROOM_RESOLUTION:
+        middle = (inside + outside) / 2.0
+        if _confirm(machine, poses, offset + middle * direction, options)[0] is None:
+            inside = middle
+        else:
+            outside = failed_at = middle
+    return inside, outside, failed_at
 
 
 def _bisect(machine: Machine, screen: _Points, offset: np.ndarray, directions: np.ndarray, lo: np.ndarray,

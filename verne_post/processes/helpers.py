@@ -78,6 +78,45 @@ class Helper:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
+_context: Any = None  # what the processes of a Pool share (inherited at the fork, not pickled)
+
+
+def _set_context(context: Any) -> None:
+    global _context
+    _context = context
+
+
+def _in_context(function: Callable[..., T], args: tuple) -> T:
+    return function(_context, *args)
+
+
+class Pool:
+    """Up to ``workers`` forked processes that run calls ``function(context, *args)`` side by side:
+    ``context`` is inherited at the fork (not pickled), only the arguments and results travel.
+    With one worker, no fork, or a single call, the calls run in this process, in turn: the same
+    code on the same numbers either way. ``function`` must be a module's (it is pickled by name)."""
+
+    def __init__(self, context: Any, workers: int) -> None:
+        self._context = context
+        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                         initializer=_start, initargs=(_set_context, (context,))
+                                         ) if available(workers) else None
+
+    def map(self, function: Callable[..., T], calls: list[tuple]) -> list[T]:
+        """``function(context, *args)`` for each ``args`` of ``calls``, the results in that order."""
+        if self._pool is None or len(calls) < 2:
+            return [function(self._context, *args) for args in calls]
+        try:
+            futures = [self._pool.submit(_in_context, function, args) for args in calls]
+        except BrokenProcessPool:
+            raise _died() from None
+        return [outcome(future) for future in futures]
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+
 _machine: Machine | None = None  # the machine of the verifier helper it lives in (inherited, not pickled)
 _verifier: Verifier | None = None  # its verifier
 
