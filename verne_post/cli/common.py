@@ -180,8 +180,8 @@ choices_before_report = [
     click.option("--auto-offset", is_flag=True, hidden=True),
     click.option("--room", "placement_room", is_flag=True,
                  help="With --work-offset auto: also find how far the part may move along each axis and still "
-                      "run, and record it in the header (as 'verne-post place': certified by full checks, "
-                      "about a minute on the impeller example)."),
+                      "run, for the header and the report (as 'verne-post place': certified by full checks, "
+                      "about 40 s on the impeller example)."),
     click.option("--tol", type=TIP_TOL, default=0.005, show_default=True,
                  help="Tool tip deviation allowed between blocks, mm."),
     click.option("--axis-tol", type=AXIS_TOL, default=0.05, show_default=True,
