@@ -519,12 +519,18 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
     checks = Pool((machine, poses, options), options.workers)
 
     def bisect_fully(which: list[int]) -> None:
-        """Bisect the directions ``which`` with the full checks themselves."""
-        found = checks.map(_bisect_fully, [(offset, directions[d], inside[d], outside[d], failed_at[d])
-                                           for d in which])
-        for d, bracket in zip(which, found, strict=True):
-            inside[d], outside[d], failed_at[d] = bracket
-            tick()
+        """Bisect the directions ``which`` with the full checks themselves, in step (one check
+        per direction at a time: an interrupted room waits for one check, not a bisection)."""
+        while which := [d for d in which if outside[d] - inside[d] > 2 * ROOM_RESOLUTION]:
+            middle = [(inside[d] + outside[d]) / 2.0 for d in which]
+            verdicts = checks.map(_confirm_at, [(offset + m * directions[d],) for d, m in zip(which, middle,
+                                                                                               strict=True)])
+            for d, m, (worst, _, _) in zip(which, middle, verdicts, strict=True):
+                if worst is None:
+                    inside[d] = m
+                else:
+                    outside[d] = failed_at[d] = m
+                tick()
 
     try:
         for round_ in range(ROUNDS):
@@ -584,21 +590,6 @@ def _confirm_at(context: _Context, offset: np.ndarray) -> tuple[np.ndarray | Non
     """:func:`_confirm` at ``offset`` (mm) of the room's program (a :class:`Pool` call)."""
     machine, poses, options = context
     return _confirm(machine, poses, offset, options)
-
-
-def _bisect_fully(context: _Context, offset: np.ndarray, direction: np.ndarray, inside: float, outside: float,
-                  failed_at: float) -> tuple[float, float, float]:
-    """Bisect the distance along ``direction`` from ``offset`` (mm) between ``inside`` (runs) and
-    ``outside`` (fails) with the full checks to 2 ROOM_RESOLUTION: the new (inside, outside,
-    nearest distance a full check failed at)."""
-    machine, poses, options = context
-    while outside - inside > 2 * ROOM_RESOLUTION:
-        middle = (inside + outside) / 2.0
-        if _confirm(machine, poses, offset + middle * direction, options)[0] is None:
-            inside = middle
-        else:
-            outside = failed_at = middle
-    return inside, outside, failed_at
 
 
 def _bisect(machine: Machine, screen: _Points, offset: np.ndarray, directions: np.ndarray, lo: np.ndarray,

@@ -1,6 +1,7 @@
 """Helper processes of :func:`verne_post.pipeline.post`: on a machine with more than one core, a
 long program's planning (stage 6) and verification (stage 7) run beside the main process, which
-meanwhile solves, checks and writes the next part.
+meanwhile solves, checks and writes the next part. And :class:`Pool`: independent calls side by
+side (placement's room: the full checks of different directions).
 
 A helper is a forked process that runs what it is handed in the order it was handed (a process
 pool of one worker), so the verifier keeps where its reading of the program stands from one part
