@@ -292,3 +292,15 @@ def test_the_room_checked_in_processes_is_the_room_checked_in_one(monkeypatch: p
         found[workers] = (placement.offset, placement.room, placement.margin, len(here))
     assert found[1][:3] == found[2][:3]
     assert found[2][3] < found[1][3]
+
+
+def test_place_in_one_process_reports_the_room_of_the_default(tmp_path: Path, placed: dict) -> None:
+    """'place --workers 1' (every full check in this process) against the default (one process per
+    core): the same JSON but for the seconds; --workers 0 is a one-line error."""
+    report = tmp_path / "one.json"
+    code, _, err = run("place", str(REAL), "--tool-length", TOOL, "--workers", "1", "--report", str(report), "-q")
+    assert code == 0, err
+    one = json.loads(report.read_text())
+    assert {k: v for k, v in one.items() if k != "seconds"} == {k: v for k, v in placed.items() if k != "seconds"}
+    code, _, err = run("place", str(REAL), "--tool-length", TOOL, "--workers", "0", "-q")
+    assert code == 2 and err.count("\n") == 1 and "--workers" in err

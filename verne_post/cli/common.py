@@ -234,5 +234,6 @@ def post_options(function: Callable[..., Any]) -> Callable[..., Any]:
         *choices_after_report,
         click.option("--workers", type=Number(1, 1024, integer=True), default=os.cpu_count() or 1,
                      show_default="the cores", help="Processes: with 2 or more, the planning and the verification "
-                                                    "run beside the other stages; 1 runs everything in this one."),
+                                                    "run beside the other stages (and --room's full checks side by "
+                                                    "side); 1 runs everything in this one."),
     ])

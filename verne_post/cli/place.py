@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import os
 import sys
 from typing import Any
 
@@ -13,6 +14,7 @@ from .common import (
     AXIS_TOL,
     TIP_TOL,
     TOOL_LENGTH,
+    Number,
     decorated,
     machine_option,
     read_cl,
@@ -35,10 +37,12 @@ from .post import PLACEMENT_STEPS, progress_bar
 @reader_option_group
 @functools.partial(decorated, options=setup_options)
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write the placement as JSON.")
+@click.option("--workers", type=Number(1, 1024, integer=True), default=os.cpu_count() or 1, show_default="the cores",
+              help="Processes for the room's full checks (directions side by side); 1 runs them all in this one.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @user_errors
 def place_command(cl_file: str, machine_path: str | None, tool_length: float | None, tol: float, axis_tol: float,
-                  report_path: str | None, quiet: bool, stock: tuple[str, ...], fixtures: tuple[str, ...],
+                  report_path: str | None, workers: int, quiet: bool, stock: tuple[str, ...], fixtures: tuple[str, ...],
                   setup_path: str | None, **reading: Any) -> None:
     """Where to clamp the part: the work offset at which PART.cls runs with the most room to every
     limit and singularity, and how far the part may move from it and still run.
@@ -52,8 +56,8 @@ def place_command(cl_file: str, machine_path: str | None, tool_length: float | N
     from ..placement.search import place
 
     machine = load_machine(machine_path)
-    options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, stock=stock,
-                          fixtures=fixtures, **setup_file(setup_path), **reading)
+    options = PostOptions(tool_length=tool_length, tol=tol, axis_tol=axis_tol, plan=False, workers=workers,
+                          stock=stock, fixtures=fixtures, **setup_file(setup_path), **reading)
     toolpath = read_cl(cl_file, **reading)
     poses = machine_poses(toolpath, machine, work_offset=(0.0, 0.0, 0.0), tool_length=tool_length,
                           setup=setup_of(machine, options, toolpath.units))
