@@ -229,19 +229,17 @@ def _screen_headroom(machine: Machine, screen: _Points, offsets: np.ndarray, exa
     return np.where(preferred_runs | other_runs | screen.in_cone, best, np.minimum(best, -1e-9))
 
 
-def _score(room: np.ndarray, overhang: np.ndarray | None = None) -> np.ndarray:
+def _score(room: np.ndarray) -> np.ndarray:
     """One number per offset from (K, S) headrooms: the smallest where every pose runs, else
-    minus the share of poses that fail (so the search is led towards feasibility); an offset
-    that puts the part off the table (``overhang`` mm > 0, :func:`_overhang`) below every other,
-    the less the overhang the better."""
+    minus the share of poses that fail (so the search is led towards feasibility)."""
     failing = np.mean(room < 0, axis=1)
-    score = np.where(failing > 0, -failing, np.min(room, axis=1))
-    return score if overhang is None else np.where(overhang > 0, -1.0 - overhang / 1e4, score)
+    return np.where(failing > 0, -failing, np.min(room, axis=1))
 
 
 def _scores(machine: Machine, screen: _Points, offsets: np.ndarray, seat: _Seat | None) -> np.ndarray:
-    """:func:`_score` of offsets (K, 3) mm on ``screen``; the kinematics only where the part
-    sits on the table (an overhang alone scores an offset: most of the coarse grid over the
+    """:func:`_score` of offsets (K, 3) mm on ``screen``; an offset that puts the part off the
+    table (overhang mm > 0, :meth:`_Seat.overhang`) below every other, the less the overhang the
+    better, scored by that alone without the kinematics (most of the coarse grid over the
     machine's reach puts the part beside the table)."""
     if seat is None:
         return _score(_screen_headroom(machine, screen, offsets))
@@ -540,9 +538,10 @@ def _room(machine: Machine, poses: MachinePoses, points: _Points, rows: np.ndarr
             outside[pending] = hi
             tick()
             failed, unseen = [], []
-            confirmed = checks.map(_confirm_at, [(offset + lo[k] * directions[d],) for k, d in enumerate(pending)])
+            ats = offset + lo[:, None] * directions[pending]
+            confirmed = checks.map(_confirm_at, [(at,) for at in ats])
             for k, d in enumerate(pending):
-                at = offset + lo[k] * directions[d]
+                at = ats[k]
                 worst, screenable, failing = confirmed[k]
                 tick()
                 if worst is None:

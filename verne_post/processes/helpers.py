@@ -56,21 +56,31 @@ def _started() -> None:
     """Nothing: the first call a helper gets, so that it starts at once."""
 
 
+def _forked(workers: int, initializer: Callable[..., None] | None, initargs: tuple) -> ProcessPoolExecutor:
+    """Up to ``workers`` forked processes, ``initializer(*initargs)`` called in each as it starts
+    (with fork nothing is pickled for that), Ctrl-C left to the main process."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                               initializer=_start, initargs=(initializer, initargs))
+
+
+def _submit(pool: ProcessPoolExecutor, function: Callable[..., T], *args: Any) -> Future[T]:
+    try:
+        return pool.submit(function, *args)
+    except BrokenProcessPool:
+        raise _died() from None
+
+
 class Helper:
     """A forked process that runs the calls handed to it in turn; ``initializer(*initargs)`` is
     called as it starts (with fork nothing is pickled for that)."""
 
     def __init__(self, initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> None:
-        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
-                                         initializer=_start, initargs=(initializer, initargs))
+        self._pool = _forked(1, initializer, initargs)
         self._pool.submit(_started)
 
     def submit(self, function: Callable[..., T], *args: Any) -> Future[T]:
         """Run ``function(*args)`` there, after everything handed over before."""
-        try:
-            return self._pool.submit(function, *args)
-        except BrokenProcessPool:
-            raise _died() from None
+        return _submit(self._pool, function, *args)
 
     def close(self) -> None:
         """Stop, once what is under way is done: what has not started is dropped (a failed run
@@ -99,18 +109,13 @@ class Pool:
 
     def __init__(self, context: Any, workers: int) -> None:
         self._context = context
-        self._pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                         initializer=_start, initargs=(_set_context, (context,))
-                                         ) if available(workers) else None
+        self._pool = _forked(workers, _set_context, (context,)) if available(workers) else None
 
     def map(self, function: Callable[..., T], calls: list[tuple]) -> list[T]:
         """``function(context, *args)`` for each ``args`` of ``calls``, the results in that order."""
         if self._pool is None or len(calls) < 2:
             return [function(self._context, *args) for args in calls]
-        try:
-            futures = [self._pool.submit(_in_context, function, args) for args in calls]
-        except BrokenProcessPool:
-            raise _died() from None
+        futures = [_submit(self._pool, _in_context, function, args) for args in calls]
         return [outcome(future) for future in futures]
 
     def close(self) -> None:
