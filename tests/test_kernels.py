@@ -171,3 +171,83 @@ def test_a_program_posted_on_the_compiled_route_has_the_same_axis_words(machine:
             moved += 1
             assert abs(float(fa.group(1)) / float(fb.group(1)) - 1.0) <= 1e-3
     assert moved <= len(numpy_lines) // 50
+
+
+def test_the_compiled_atan2_is_within_two_ulp_of_libm() -> None:
+    """The IK loop's atan2 (no libm call, so its loop runs in SIMD lanes) against libm's (numpy's
+    arctan2), on 200,000 pairs over 20 decades of ratio, every quadrant and signed zeros; the
+    pole's (0, 0), which it leaves to libm, gives NaN."""
+    from verne_post.kinematics._loops import _atan2
+
+    rng = np.random.default_rng(41)
+    y = rng.normal(size=200_000) * 10.0 ** rng.uniform(-10, 10, 200_000)
+    x = rng.normal(size=200_000) * 10.0 ** rng.uniform(-10, 10, 200_000)
+    y[:500], x[500:1000], y[1000:1500] = 0.0, 0.0, -0.0
+    x[1500:2000] = -y[1500:2000]  # on the diagonals, where the reduction switches
+    found = np.array([_atan2(a, b) for a, b in zip(y.tolist(), x.tolist(), strict=True)])
+    expected = np.arctan2(y, x)
+    assert np.all(np.abs(found - expected) <= 2 * np.spacing(np.abs(expected)))
+    assert np.array_equal(np.signbit(found), np.signbit(expected))
+    assert np.isnan(_atan2(0.0, 0.0))
+
+
+def test_the_compiled_root_certificate_settles_the_poses_the_numpy_one_does(machine: vp.Machine,
+                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled test of the IK's candidates for the exact route (kernels.settled) against the
+    numpy route's (the residual test and full._only_working_root, which
+    tests/test_kinematics_properties.py checks against every root): the same poses settled, on
+    both pairs of poses mostly moved out of reach."""
+    from verne_post.kinematics import full
+
+    monkeypatch.setenv(kernels.ROUTE_VARIABLE, "numba")
+    kernels._numba_kernels.cache_clear()
+    try:
+        for seed, geom in enumerate(_geometries(machine)):
+            tip, axis, pair, theta2, _ = _poses(machine, geom, seed + 51)
+            for flip in (1, -1):
+                joints, alpha, _, _, coefficients, _, candidates = kernels.ik_working(geom, tip, axis, flip * pair,
+                                                                                      theta2)
+                settled = kernels.settled(geom, coefficients, alpha, joints, candidates)
+                rows = np.flatnonzero(candidates)
+                _, a, b, x1sq = coefficients[rows].T
+                residual, yg = full._signed_coupling(geom, a, b, x1sq, alpha[rows])
+                root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + geom.R1)) & (np.abs(alpha[rows]) < geom.alpha_max)
+                        & ~np.all(np.isfinite(joints[rows, :3]), axis=-1))
+                expected = np.zeros(len(tip), bool)
+                expected[rows[root]] = full._only_working_root(geom, a[root], b[root], x1sq[root], alpha[rows][root])
+                assert expected.sum() > 500  # the kind of pose the certificate is for is there
+                assert np.array_equal(settled, expected)
+    finally:
+        kernels._numba_kernels.cache_clear()
+
+
+@pytest.mark.parametrize("offsets", [False, True])
+def test_the_compiled_inverse_kinematics_makes_the_numpy_routes_choice(machine: vp.Machine, offsets: bool,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """api.inverse_kinematics on the compiled route (both pairs, then one loop a pose for the
+    statuses, margins and the choice) against the numpy route: the same pair and status at every
+    pose, joints within 1e-9 mm and rad where usable, margins to 1e-9; without a theta2 hint, with
+    one and with one a pose; usable poses, poses moved far out of reach and poses on the pole;
+    with a tool and with joint zero offsets."""
+    if offsets:
+        zeros = {name: getattr(machine.joints, name).model_copy(update={"offset": offset}) for name, offset in
+                 (("rho1", 0.7), ("rho2", -1.3), ("rho3", 0.4), ("theta1", 0.3), ("theta2", -2.0))}
+        machine = machine.model_copy(update={"joints": machine.joints.model_copy(update=zeros)})
+    tool = 76.2 if offsets else 0.0
+    geom = machine.kinematic_geometry(tool)
+    tip, axis, _, theta2, usable = _poses(machine, geom, 61 + offsets)
+    for hint in (None, 0.4, theta2 + np.random.default_rng(62).normal(0.0, 1.0, len(theta2))):
+        numpy_route, numba_route = _both(monkeypatch, vp.inverse_kinematics, machine, tip, axis, hint,
+                                         tool_length=tool)
+        assert np.array_equal(numpy_route.status, numba_route.status)
+        assert np.array_equal(numpy_route.pair, numba_route.pair)
+        assert numba_route.status.dtype == numpy_route.status.dtype and numba_route.pair.dtype == np.int8
+        assert len(set(numpy_route.status.tolist())) == 4  # ok, unreachable, beyond limits, singular all there
+        for name in ("joints", "alpha", "phi", "platform"):
+            a, b = getattr(numpy_route, name), getattr(numba_route, name)
+            assert np.array_equal(np.isnan(a), np.isnan(b)), name
+            assert np.nanmax(np.abs(a - b)[usable]) <= 1e-9, name
+        for a, b in zip(fields(numpy_route.margins), fields(numba_route.margins), strict=True):
+            x, y = getattr(numpy_route.margins, a.name), getattr(numba_route.margins, b.name)
+            assert np.array_equal(np.isnan(x), np.isnan(y)), a.name
+            assert np.nanmax(np.abs(x - y)) <= 1e-9, a.name

@@ -288,6 +288,28 @@ def test_pole_takes_theta2_from_the_hint(machine: vp.Machine) -> None:
         np.testing.assert_allclose(fk.axis, axis, atol=1e-12)
 
 
+def test_a_theta2_hint_a_pose_chooses_as_that_pose_alone_with_its_hint(machine: vp.Machine) -> None:
+    """inverse_kinematics with one theta2 hint a pose (rad) gives, pose by pose, what a call with
+    that pose and its hint alone gives: among them poses whose first choice is singular and whose
+    other pair is ok (the choice looks again there, with those poses' hints)."""
+    rng = np.random.default_rng(71)
+    joints = np.array([0.0, 0.0, 0.0, -np.pi / 2, -np.pi]) + rng.random((40_000, 5)) * [1300, 1300, 1300, np.pi,
+                                                                                         2 * np.pi]
+    fk = vp.forward_kinematics(machine, joints)
+    tip, axis = fk.tip[fk.reachable], fk.axis[fk.reachable]
+    plus, minus = vp.inverse_kinematics_pairs(machine, tip, axis)
+    second_look = np.flatnonzero(((plus.status == vp.Status.SINGULAR) & (minus.status == vp.Status.OK))
+                                 | ((minus.status == vp.Status.SINGULAR) & (plus.status == vp.Status.OK)))
+    assert second_look.size >= 20
+    rows = np.concatenate([second_look[:60], rng.choice(len(tip), 60, replace=False)])
+    hints = rng.uniform(-7.0, 7.0, len(rows))
+    together = vp.inverse_kinematics(machine, tip[rows], axis[rows], hints)
+    for k, row in enumerate(rows):
+        alone = vp.inverse_kinematics(machine, tip[row:row + 1], axis[row:row + 1], float(hints[k]))
+        assert alone.status[0] == together.status[k] and alone.pair[0] == together.pair[k]
+        np.testing.assert_array_equal(alone.joints[0], together.joints[k])
+
+
 def test_the_working_mode_ik_finds_every_pose_the_all_solutions_route_solves(machine: vp.Machine) -> None:
     """Tool poses over a box wider than the VERNE's reach, tilted up to 100 degrees, both angle
     pairs: the working-mode IK (Newton, then the all-solutions route unless eq. 31 has surely no

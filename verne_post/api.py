@@ -17,6 +17,7 @@ from .kinematics import (
     MachineIK,
     MachineIKSolutions,
     Margins,
+    kernels,
     machine_fk_all,
     machine_fk_working,
     machine_ik_all,
@@ -24,6 +25,7 @@ from .kinematics import (
     margins,
     unwrap_near,
 )
+from .kinematics.full import true_theta2
 from .machine import Machine
 
 
@@ -207,15 +209,26 @@ def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
     without a hint the one with the smaller |theta1|. theta2 is returned unwrapped to within
     pi of the hint; on the pole (axis along the table normal) theta2 = hint (0 without one).
     """
+    if kernels.kernel("inverse_kinematics") is not None:
+        return _inverse_kinematics_compiled(machine, tip, axis, theta2_hint, tool_length)
+    return _inverse_kinematics_stepwise(machine, tip, axis, theta2_hint, tool_length)
+
+
+def _inverse_kinematics_stepwise(machine: Machine, tip: np.ndarray, axis: np.ndarray,
+                                 theta2_hint: np.ndarray | float | None, tool_length: float) -> IKResult:
+    """:func:`inverse_kinematics` in whole-array steps (the numpy route's, and the compiled one's
+    for the poses it leaves to the all-solutions route)."""
     hint = 0.0 if theta2_hint is None else theta2_hint
     # Both pairs without margins (reach, travel, rod clearance), margins for the chosen pair
     # only; where those make it singular, the other pair's margins decide.
     plus, minus = inverse_kinematics_pairs(machine, tip, axis, tool_length=tool_length, theta2_at_pole=hint,
                                            with_margins=False)
+    hints = np.broadcast_to(np.asarray(hint, dtype=float), (len(plus.alpha),))
 
-    def cost(r: IKResult) -> np.ndarray:
+    def cost(r: IKResult, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The solutions' cost; ``rows``: the poses they are of."""
         theta1, theta2 = r.joints[:, 3], r.joints[:, 4]
-        preference = np.abs(theta1) if theta2_hint is None else np.abs(unwrap_near(theta2, hint) - hint)
+        preference = np.abs(theta1) if theta2_hint is None else np.abs(unwrap_near(theta2, hints[rows]) - hints[rows])
         penalty = np.array([0.0, 1e9, 1e6, 1e3])[r.status]  # by Status: ok, unreachable, limits, singular
         return penalty + np.nan_to_num(preference, nan=0.0)
 
@@ -225,11 +238,37 @@ def inverse_kinematics(machine: Machine, tip: np.ndarray, axis: np.ndarray,
     retry = np.flatnonzero((chosen.status == Status.SINGULAR) & (other.status == Status.OK))
     if retry.size:
         alternative = assess(machine, other.rows(retry), tool_length)
-        better = cost(alternative) < cost(chosen.rows(retry))
+        better = cost(alternative, retry) < cost(chosen.rows(retry), retry)
         chosen = chosen.scatter(retry[better], alternative.rows(better))
     joints = chosen.joints.copy()
     joints[:, 4] = unwrap_near(joints[:, 4], hint)
     return chosen.with_joints(joints)
+
+
+def _inverse_kinematics_compiled(machine: Machine, tip: np.ndarray, axis: np.ndarray,
+                                 theta2_hint: np.ndarray | float | None, tool_length: float) -> IKResult:
+    """:func:`inverse_kinematics` on the compiled route: one loop (kernels.inverse_kinematics)
+    solves both pairs a block of poses at a time and makes the choice pose by pose, without the
+    stepwise route's dozens of passes over every array; the rare poses that need the
+    all-solutions route go the stepwise way."""
+    given = (tip, axis)  # the stepwise route normalises the axes itself
+    tip, axis = _as_poses(tip, axis)
+    geom = machine.kinematic_geometry(tool_length)
+    hint = np.broadcast_to(np.asarray(0.0 if theta2_hint is None else theta2_hint, dtype=float), (len(tip),))
+    t = machine.singularity
+    *found, exact = kernels.inverse_kinematics(  # type: ignore[misc]
+        geom, *joint_bounds(machine), (t.serial_min, t.parallel_min, t.machine_min, t.rod_clearance_min), tip, axis,
+        np.broadcast_to(true_theta2(geom, hint), hint.shape), hint, theta2_hint is not None)
+    result = IKResult(*found[:5], Margins(*found[5]), found[6])  # type: ignore[call-arg]
+    rows = np.flatnonzero(exact)
+    if rows.size:
+        stepwise = _inverse_kinematics_stepwise(machine, *(np.atleast_2d(a)[rows] for a in given),
+                                                None if theta2_hint is None else hint[rows], tool_length)
+        for whole, part in ((result, stepwise), (result.margins, stepwise.margins)):  # in place: the arrays are new
+            for name in type(whole).__dataclass_fields__:
+                if name != "margins":
+                    getattr(whole, name)[rows] = getattr(part, name)
+    return result
 
 
 def inverse_kinematics_all(machine: Machine, tip: np.ndarray, axis: np.ndarray, *, tool_length: float = 0.0,

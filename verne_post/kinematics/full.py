@@ -30,7 +30,7 @@ from .module import (
     working_assembly_exact,
     working_sliders,
 )
-from .tolerances import POLE_EPS
+from .tolerances import POLE_EPS, ROOT_PIECES
 from .trigpoly import TrigPoly, real_half_angle_roots, roots_within
 
 
@@ -68,7 +68,7 @@ def axis_from_angles(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     return np.stack([s1 * np.sin(phi2), -s1 * np.cos(phi2), np.cos(phi1) + 0.0 * phi2], axis=-1)
 
 
-def _true_theta2(geom: Geometry, theta2: np.ndarray | float) -> np.ndarray:
+def true_theta2(geom: Geometry, theta2: np.ndarray | float) -> np.ndarray:
     """True rotary angle (rad) of a theta2 reading (untouched without offsets: bit-identical)."""
     theta2 = np.asarray(theta2, dtype=float)
     return theta2 + geom.theta_offset[1] if geom.has_offsets else theta2
@@ -109,8 +109,6 @@ def _platform_pose(geom: Geometry, xp: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.stack([xp, a * c + b * s, geom.da - b * c + a * s], axis=-1)
 
 
-#: Pieces of (-alpha_max, alpha_max) in which eq. 31's roots are counted (:func:`_only_working_root`).
-ROOT_PIECES = 8
 
 
 def _only_working_root(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.ndarray, root: np.ndarray
@@ -177,7 +175,7 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     n = tip.shape[0]
     pair = np.broadcast_to(np.asarray(pair), (n,))
     # The caller's theta2 at the pole is a reading, like every joint out of here.
-    theta2_at_pole = np.broadcast_to(_true_theta2(geom, theta2_at_pole), (n,))
+    theta2_at_pole = np.broadcast_to(true_theta2(geom, theta2_at_pole), (n,))
     g = geom
     fast = kernels.ik_working(geom, tip, axis, pair, theta2_at_pole)
     if fast is None:
@@ -186,7 +184,12 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     xp, a, b, x1sq = coefficients.T
     rho = joints[:, :3]
     retry = np.flatnonzero(candidates)
-    if retry.size and exact_fallback:
+    settled = None
+    if retry.size and exact_fallback:  # the compiled route tests every candidate in one loop
+        settled = kernels.settled(geom, coefficients, alpha, joints, candidates)
+    if settled is not None:
+        retry = np.flatnonzero(candidates & ~settled)
+    elif retry.size and exact_fallback:
         # Newton found a root of eq. 31 in (-alpha_max, alpha_max) where a leg does not reach: if
         # it is the only root there, no working solution exists and the all-solutions route (the
         # sextic's eigenvalues, most of this function's time where poses are out of reach) would
@@ -266,7 +269,7 @@ def machine_ik_all(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.n
     in alpha = theta1 + phi1 as a sextic in tan(alpha/2); each real root gives the platform
     pose and, through eq. 10-13, up to 4 slider sets (more on the special cases of Table II).
     """
-    found = _machine_ik_all(geom, tip, axis, pair, _true_theta2(geom, theta2_at_pole))
+    found = _machine_ik_all(geom, tip, axis, pair, true_theta2(geom, theta2_at_pole))
     return found if not geom.has_offsets else replace(found, joints=geom.readings(found.joints))
 
 

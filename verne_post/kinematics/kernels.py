@@ -28,6 +28,8 @@ from functools import lru_cache
 import numpy as np
 
 from .geometry import Geometry
+from .tolerances import ROOT_PIECES
+from .trigpoly import _vincent
 
 #: Environment variable choosing the route: ``numba`` (where importable); anything else is numpy.
 ROUTE_VARIABLE = "VERNE_POST_KERNELS"
@@ -113,4 +115,52 @@ def fk_working(geom: Geometry, joints: np.ndarray, alpha_guess: np.ndarray | Non
     guess = np.zeros(n) if alpha_guess is None else np.ascontiguousarray(np.broadcast_to(alpha_guess, (n,)),
                                                                           dtype=float)
     loop(geometry_constants(geom), np.ascontiguousarray(joints, dtype=float), guess, alpha_guess is not None, *out)
+    return out
+
+
+def inverse_kinematics(geom: Geometry, lower: np.ndarray, upper: np.ndarray,
+                       thresholds: tuple[float, float, float, float], tip: np.ndarray, axis: np.ndarray,
+                       theta2_at_pole: np.ndarray, hint: np.ndarray, has_hint: bool) -> tuple[np.ndarray, ...] | None:
+    """Compiled ``api.inverse_kinematics`` in one pass, or None on the numpy route. tip (N, 3) mm,
+    unit axis (N, 3), table frame; joint bounds (5,) mm/rad; thresholds: serial, parallel,
+    machine, rod clearance (mm); theta2 at the pole (N,) true rad and the hint (N,) as read, rad.
+    Returns the chosen solutions' (joints (N, 5), alpha
+    (N,), phi (N, 2), pair (N,) int8, status (N,) int8, margins (4, N), platform (N, 3)) and exact
+    (N,): the poses left to the numpy route (rows not filled)."""
+    loop = kernel("inverse_kinematics")
+    if loop is None:
+        return None
+    n = len(tip)
+    offsets = np.array((*geom.rho_offset, *geom.theta_offset), dtype=float)
+    out = (np.empty((n, 5)), np.empty(n), np.empty((n, 2)), np.empty(n, np.int8), np.empty(n, np.int8),
+           np.empty((4, n)), np.empty((n, 3)), np.empty(n, bool))
+    loop(geometry_constants(geom), offsets, geom.has_offsets, np.asarray(lower, float), np.asarray(upper, float),
+         np.array(thresholds, dtype=float), np.ascontiguousarray(tip, dtype=float),
+         np.ascontiguousarray(axis, dtype=float), np.ascontiguousarray(theta2_at_pole, dtype=float),
+         np.ascontiguousarray(hint, dtype=float), has_hint, _root_pieces(geom.alpha_max), *out)
+    return out
+
+
+@lru_cache(maxsize=8)
+def _root_pieces(alpha_max: float) -> tuple[np.ndarray, ...]:
+    """The pieces of (-alpha_max, alpha_max) (rad) in which the compiled certificate counts eq. 31's
+    roots, as full._only_working_root cuts them: the edges (rad), their cos, sin and tan(edge / 2),
+    and (pieces, 7, 7) Vincent's transform of a sextic onto each piece (cached: not to be written to)."""
+    edges = np.linspace(-alpha_max, alpha_max, ROOT_PIECES + 1)
+    t = np.tan(0.5 * edges)
+    return (edges, np.cos(edges), np.sin(edges), t,
+            np.stack([_vincent(6, float(t[j]), float(t[j + 1])) for j in range(ROOT_PIECES)]))
+
+
+def settled(geom: Geometry, coefficients: np.ndarray, alpha: np.ndarray, joints: np.ndarray, candidates: np.ndarray
+            ) -> np.ndarray | None:
+    """Compiled test of ``full.machine_ik_working``'s candidates for the exact route: (N,) True
+    where Newton's root alpha (rad) is surely eq. 31's only working root in (-alpha_max,
+    alpha_max) and a leg does not reach there (no working solution); None on the numpy route.
+    coefficients (N, 4) = (xP, A, B, X1^2) mm, mm^2; joints (N, 5) true mm, rad."""
+    loop = kernel("settled")
+    if loop is None:
+        return None
+    out = np.empty(len(alpha), bool)
+    loop(geometry_constants(geom), coefficients, alpha, joints, candidates, _root_pieces(geom.alpha_max), out)
     return out
