@@ -109,8 +109,6 @@ def _platform_pose(geom: Geometry, xp: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.stack([xp, a * c + b * s, geom.da - b * c + a * s], axis=-1)
 
 
-
-
 def _only_working_root(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.ndarray, root: np.ndarray
                        ) -> np.ndarray:
     """(N,) bool: where ``root`` (rad), a root of the signed eq. 31 (working mode, s1 = -1) in

@@ -124,9 +124,9 @@ def inverse_kinematics(geom: Geometry, lower: np.ndarray, upper: np.ndarray,
     """Compiled ``api.inverse_kinematics`` in one pass, or None on the numpy route. tip (N, 3) mm,
     unit axis (N, 3), table frame; joint bounds (5,) mm/rad; thresholds: serial, parallel,
     machine, rod clearance (mm); theta2 at the pole (N,) true rad and the hint (N,) as read, rad.
-    Returns the chosen solutions' (joints (N, 5), alpha
-    (N,), phi (N, 2), pair (N,) int8, status (N,) int8, margins (4, N), platform (N, 3)) and exact
-    (N,): the poses left to the numpy route (rows not filled)."""
+    Returns the chosen solutions' (joints (N, 5), alpha (N,), phi (N, 2), pair (N,) int8, status
+    (N,) int8, margins (4, N), platform (N, 3)) and exact (N,): the poses left to the stepwise
+    route (their rows not filled)."""
     loop = kernel("inverse_kinematics")
     if loop is None:
         return None
