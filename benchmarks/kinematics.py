@@ -133,7 +133,7 @@ def main() -> None:
     fk = vp.forward_kinematics(machine, joints)
     paths = {  # name: (call, repeats)
         "working-mode IK (closed form, vectorised)": (lambda: machine_ik_working(geom, tip, axis, pair=pair), 3),
-        "  inverse_kinematics API (pairs, status, margins)": (lambda: vp.inverse_kinematics(machine, tip, axis), 1),
+        "  inverse_kinematics API (pairs, status, margins)": (lambda: vp.inverse_kinematics(machine, tip, axis), 3),
         "  margins of the working-mode poses": (lambda: margins(geom, joints, fk.platform, fk.alpha), 3),
         "working-mode FK (vectorised)": (lambda: machine_fk_working(geom, joints), 3),
         "  the same started from a neighbour's tilt": (lambda: machine_fk_working(geom, joints, warm), 3),

@@ -16,7 +16,7 @@ import math
 import numba
 import numpy as np
 
-from .adjugate import fill_adjugate
+from .adjugate import adjugate_entries
 from .tolerances import CLOSURE_TOL, POLE_EPS
 
 NUMBA_VERSION = str(numba.__version__)
@@ -331,68 +331,81 @@ def _settled(c, coefficients, alpha, joints, candidates, pieces, settled):
                                                     scratch)
 
 
-_adjugate4 = _inline(fill_adjugate)
+_adjugate = _inline(adjugate_entries)
+_LARGEST = 1.7976931348623157e308
 
 
 @_inline
-def _inverse_condition(m, adj, det):
-    """jacobian._inverse_condition of one matrix: 4 |det| / (|M|_F |adj|_F), NaN as 0."""
-    m_sq, adj_sq = 0.0, 0.0
-    for i in range(4):
-        for j in range(4):
-            m_sq += m[i, j] * m[i, j]
-            adj_sq += adj[i, j] * adj[i, j]
-    value = 4.0 * abs(det) / math.sqrt(m_sq * adj_sq)
-    if math.isnan(value):
-        return 0.0
-    return min(value, 1.7976931348623157e308)
+def _condition(sum_sq: float, adj_sum_sq: float, det: float) -> float:
+    """jacobian._inverse_condition of one matrix from its and its adjugate's sums of squares:
+    4 |det| / (|M|_F |adj|_F), NaN as 0."""
+    value = 4.0 * abs(det) / math.sqrt(sum_sq * adj_sum_sq)
+    return 0.0 if math.isnan(value) else min(value, _LARGEST)
 
 
 @_inline
-def _margins_of(c, rho1, rho2, rho3, x, y, z, ca, sa, c1, s1, cp, sp, a, adj, jac, d_pose):
+def _clamped(value: float) -> float:
+    """numpy.nan_to_num of one number: NaN as 0, +-inf as the largest finite float."""
+    return 0.0 if math.isnan(value) else max(min(value, _LARGEST), -_LARGEST)
+
+
+@_inline
+def _sum_of_squares(e) -> float:
+    """The sum of the squares of an adjugate's 16 entries (:func:`_adjugate`), in the order of the
+    twin's sum (written out: a loop inside would keep the loop around it from running in lanes)."""
+    return (e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3] + e[4] * e[4] + e[5] * e[5] + e[6] * e[6]
+            + e[7] * e[7] + e[8] * e[8] + e[9] * e[9] + e[10] * e[10] + e[11] * e[11] + e[12] * e[12]
+            + e[13] * e[13] + e[14] * e[14] + e[15] * e[15])
+
+
+@_inline
+def _margins_of(c, rho1, rho2, rho3, x, y, z, ca, sa, c1, s1, cp, sp):
     """jacobian.margins of one working-mode pose: true sliders mm, platform mm, and the cosines and
     sines of alpha, theta1 and phi1 = alpha - theta1 (true): (serial, parallel, machine, rod
-    clearance mm), formed as the twin forms them; a, adj, jac (4, 4) and d_pose (4, 3) are scratch."""
+    clearance mm), formed as the twin forms them but with every matrix entry a local number (kept
+    in registers; a loop of poses runs in SIMD lanes) and one reciprocal of the determinant
+    instead of twelve divisions."""
     d1, d2, big_r1, r1, l1, big_r2, r4, l2, l3 = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8]
     delta, da = c[9], c[10]
-    offsets = (big_r1, -big_r1, -big_r2, big_r2)
-    sliders_y = (r1, -r1, -r4, r4)
-    lengths = (l1, l1, l2, l3)
-    dxs = (d1, d1, d2, d2)
-    serial = math.inf
-    for k in range(4):
-        ux = (x + dxs[k]) / lengths[k]
-        uy = (y + offsets[k] * ca - sliders_y[k]) / lengths[k]
-        uz = (z + offsets[k] * sa - (rho1 if k < 2 else (rho2 if k == 2 else rho3))) / lengths[k]
-        a[k, 0], a[k, 1], a[k, 2] = ux, uy, uz
-        a[k, 3] = (-uy * offsets[k] * sa + uz * offsets[k] * ca) / big_r1
-        serial = min(serial, abs(uz))
-    det = _adjugate4(a, adj)
-    parallel = _inverse_condition(a, adj, det)
-    inverse_det = 1.0 / det  # one division, not twelve (the twin divides: they differ in the last digit)
-    for r in range(4):
-        d_pose[r, 0] = (adj[r, 0] * a[0, 2] + adj[r, 1] * a[1, 2]) * inverse_det
-        d_pose[r, 1] = adj[r, 2] * a[2, 2] * inverse_det
-        d_pose[r, 2] = adj[r, 3] * a[3, 2] * inverse_det
-    for col in range(3):
-        d_pose[3, col] /= big_r1
+    # A: a row a rod (1a, 1b, II, III): (xP + dx, yP + Y cos - slider y, zP + Y sin - rho) / L, and
+    # the alpha column by R1 (jacobian.margins' rods)
+    a00, a01, a02 = (x + d1) / l1, (y + big_r1 * ca - r1) / l1, (z + big_r1 * sa - rho1) / l1
+    a10, a11, a12 = (x + d1) / l1, (y + -big_r1 * ca - -r1) / l1, (z + -big_r1 * sa - rho1) / l1
+    a20, a21, a22 = (x + d2) / l2, (y + -big_r2 * ca - -r4) / l2, (z + -big_r2 * sa - rho2) / l2
+    a30, a31, a32 = (x + d2) / l3, (y + big_r2 * ca - r4) / l3, (z + big_r2 * sa - rho3) / l3
+    a03 = (-a01 * big_r1 * sa + a02 * big_r1 * ca) / big_r1
+    a13 = (-a11 * -big_r1 * sa + a12 * -big_r1 * ca) / big_r1
+    a23 = (-a21 * -big_r2 * sa + a22 * -big_r2 * ca) / big_r1
+    a33 = (-a31 * big_r2 * sa + a32 * big_r2 * ca) / big_r1
+    serial = min(min(min(min(math.inf, abs(a02)), abs(a12)), abs(a22)), abs(a32))
+    e = _adjugate(a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23, a30, a31, a32, a33)
+    sum_sq = (a00 * a00 + a01 * a01 + a02 * a02 + a03 * a03 + a10 * a10 + a11 * a11 + a12 * a12 + a13 * a13
+              + a20 * a20 + a21 * a21 + a22 * a22 + a23 * a23 + a30 * a30 + a31 * a31 + a32 * a32 + a33 * a33)
+    adj_sq = _sum_of_squares(e)
+    parallel = _condition(sum_sq, adj_sq, e[16])
+    # d(xP, yP, zP, alpha)/d rho = -diag(1, 1, 1, 1/R1) A^-1 B, B[k, slider] = -u_z of rod k
+    inverse_det = 1.0 / e[16]
+    p0 = ((e[0] * a02 + e[1] * a12) * inverse_det, e[2] * a22 * inverse_det, e[3] * a32 * inverse_det)
+    p1 = ((e[4] * a02 + e[5] * a12) * inverse_det, e[6] * a22 * inverse_det, e[7] * a32 * inverse_det)
+    p2 = ((e[8] * a02 + e[9] * a12) * inverse_det, e[10] * a22 * inverse_det, e[11] * a32 * inverse_det)
+    p3 = ((e[12] * a02 + e[13] * a12) * inverse_det / big_r1, e[14] * a22 * inverse_det / big_r1,
+          e[15] * a32 * inverse_det / big_r1)
     zr = z - da
-    for col in range(3):
-        jac[0, col] = d_pose[0, col]
-        jac[1, col] = -c1 * d_pose[1, col] - s1 * d_pose[2, col] + delta * cp * d_pose[3, col]
-        jac[2, col] = s1 * d_pose[1, col] - c1 * d_pose[2, col] + delta * sp * d_pose[3, col]
-        jac[3, col] = delta * d_pose[3, col]
-    jac[0, 3] = 0.0
-    jac[1, 3] = (-delta * cp + s1 * y - c1 * zr) / delta
-    jac[2, 3] = (c1 * y + s1 * zr - delta * sp) / delta
-    jac[3, 3] = -1.0
-    for i in range(4):
-        for j in range(4):
-            v = jac[i, j]
-            jac[i, j] = 0.0 if math.isnan(v) else max(min(v, 1.7976931348623157e308), -1.7976931348623157e308)
-    machine = 0.0
-    if parallel > 0:
-        machine = _inverse_condition(jac, adj, _adjugate4(jac, adj))
+    j00, j01, j02 = _clamped(p0[0]), _clamped(p0[1]), _clamped(p0[2])
+    j10 = _clamped(-c1 * p1[0] - s1 * p2[0] + delta * cp * p3[0])
+    j11 = _clamped(-c1 * p1[1] - s1 * p2[1] + delta * cp * p3[1])
+    j12 = _clamped(-c1 * p1[2] - s1 * p2[2] + delta * cp * p3[2])
+    j20 = _clamped(s1 * p1[0] - c1 * p2[0] + delta * sp * p3[0])
+    j21 = _clamped(s1 * p1[1] - c1 * p2[1] + delta * sp * p3[1])
+    j22 = _clamped(s1 * p1[2] - c1 * p2[2] + delta * sp * p3[2])
+    j30, j31, j32 = _clamped(delta * p3[0]), _clamped(delta * p3[1]), _clamped(delta * p3[2])
+    j13 = _clamped((-delta * cp + s1 * y - c1 * zr) / delta)
+    j23 = _clamped((c1 * y + s1 * zr - delta * sp) / delta)
+    f = _adjugate(j00, j01, j02, 0.0, j10, j11, j12, j13, j20, j21, j22, j23, j30, j31, j32, -1.0)
+    jac_sq = (j00 * j00 + j01 * j01 + j02 * j02 + 0.0 + j10 * j10 + j11 * j11 + j12 * j12 + j13 * j13
+              + j20 * j20 + j21 * j21 + j22 * j22 + j23 * j23 + j30 * j30 + j31 * j31 + j32 * j32 + 1.0)
+    f_sq = _sum_of_squares(f)
+    machine = _condition(jac_sq, f_sq, f[16]) if parallel > 0 else 0.0
     return serial, parallel, machine, big_r1 * ca - r1
 
 
@@ -400,13 +413,11 @@ def _margins_of(c, rho1, rho2, rho3, x, y, z, ca, sa, c1, s1, cp, sp, a, adj, ja
 def _margins(c, joints, platform, alpha, out):
     """jacobian.margins of N working-mode poses (true joints): out (N, 4) = serial, parallel,
     machine, rod clearance (:func:`_margins_of`)."""
-    a, adj, jac, d_pose = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 3))
     for n in range(alpha.shape[0]):
         t1, phi1 = joints[n, 3], alpha[n] - joints[n, 3]
         out[n, 0], out[n, 1], out[n, 2], out[n, 3] = _margins_of(
             c, joints[n, 0], joints[n, 1], joints[n, 2], platform[n, 0], platform[n, 1], platform[n, 2],
-            math.cos(alpha[n]), math.sin(alpha[n]), math.cos(t1), math.sin(t1), math.cos(phi1), math.sin(phi1),
-            a, adj, jac, d_pose)
+            math.cos(alpha[n]), math.sin(alpha[n]), math.cos(t1), math.sin(t1), math.cos(phi1), math.sin(phi1))
 
 
 @_inline
@@ -446,25 +457,22 @@ def _cost(status: int, theta1: float, theta2: float, hint: float, has_hint: bool
 
 
 @_inline
-def _choose(c, offsets, has_offsets, lower, upper, thresholds, joints, alpha, phi, trig, reachable, platform, hint,
-            has_hint, scratch, n, joints_out, alpha_out, phi_out, pair_out, status_out, margins_out, platform_out):
+def _choose(c, lower, upper, thresholds, joints, alpha, phi, cos_alpha, found_by_pair, reachable, platform, hint,
+            has_hint, n, joints_out, alpha_out, phi_out, pair_out, status_out, margins_out, platform_out):
     """api.inverse_kinematics' choice between the two angle pairs' solutions of pose n (index 0:
-    pair +1, 1: -1): joints (2, 5) readings mm/rad, alpha (2,) rad, phi (2, 2) rad, trig (2, 4) the
-    cosines and sines of alpha and phi1, reachable (2,), platform (2, 3) mm; theta2 hint rad. As the
+    pair +1, 1: -1): joints (2, 5) readings mm/rad, alpha (2,) rad, phi (2, 2) rad, cos_alpha (2,),
+    found_by_pair (2, 4) their margins, reachable (2,), platform (2, 3) mm; theta2 hint rad. As the
     twin: each solution's status by reach, travel and rod clearance; the cheaper (:func:`_cost`)
-    chosen and its margins computed; where they make it singular and the other pair is ok, the
+    chosen and its margins' status taken; where they make it singular and the other pair is ok, the
     other's margins too, and the cheaper taken. Writes row n of the chosen solution's joints
     (theta2 unwrapped near the hint), alpha, phi, pair (+1/-1), status (api.Status), margins (4, N)
-    (serial, parallel, machine, rod clearance mm; NaN where unreachable) and platform. ``offsets``
-    (5,) turn readings into true joints for the margins (Geometry.true_joints); ``scratch`` (4, 4,
-    4). The margins take the cosines and sines of the IK's loop (theta1's from alpha's and phi1's),
-    where the twin calls libm: they differ from its in the last digits."""
+    (serial, parallel, machine, rod clearance mm; NaN where unreachable) and platform."""
     serial_min, parallel_min, machine_min, rod_min = thresholds[0], thresholds[1], thresholds[2], thresholds[3]
     # api._status without margins: unreachable (1), beyond travel (the joints of a reachable pose
     # are finite) or rod clearance (2), else ok (0)
     inside = (reachable[0] and _within(joints, 0, lower, upper), reachable[1] and _within(joints, 1, lower, upper))
-    plain = (1 if not reachable[0] else (2 if not inside[0] or c[2] * trig[0, 0] - c[3] < rod_min else 0),
-             1 if not reachable[1] else (2 if not inside[1] or c[2] * trig[1, 0] - c[3] < rod_min else 0))
+    plain = (1 if not reachable[0] else (2 if not inside[0] or c[2] * cos_alpha[0] - c[3] < rod_min else 0),
+             1 if not reachable[1] else (2 if not inside[1] or c[2] * cos_alpha[1] - c[3] < rod_min else 0))
     best = 0 if (_cost(plain[0], joints[0, 3], joints[0, 4], hint, has_hint)
                  <= _cost(plain[1], joints[1, 3], joints[1, 4], hint, has_hint)) else 1
     chosen, status, best_cost = 0, 0, 0.0
@@ -474,13 +482,7 @@ def _choose(c, offsets, has_offsets, lower, upper, thresholds, joints, alpha, ph
         if attempt == 1 and not (status == 3 and plain[p] == 0):
             break
         if reachable[p]:
-            true = (joints[p, 0], joints[p, 1], joints[p, 2])
-            if has_offsets:
-                true = (true[0] + offsets[0], true[1] + offsets[1], true[2] + offsets[2])
-            ca, sa, cp, sp = trig[p, 0], trig[p, 1], trig[p, 2], trig[p, 3]
-            trial_found = _margins_of(c, true[0], true[1], true[2], platform[p, 0], platform[p, 1], platform[p, 2],
-                                      ca, sa, ca * cp + sa * sp, sa * cp - ca * sp, cp, sp,  # theta1 = alpha - phi1
-                                      scratch[0], scratch[1], scratch[2], scratch[3, :, :3])
+            trial_found = (found_by_pair[p, 0], found_by_pair[p, 1], found_by_pair[p, 2], found_by_pair[p, 3])
             trial = 3 if ((trial_found[0] < serial_min) | (trial_found[1] < parallel_min)
                           | (trial_found[2] < machine_min)) else 0
             if not inside[p] or trial_found[3] < rod_min:
@@ -514,15 +516,23 @@ def _inverse_kinematics(c, offsets, has_offsets, lower, upper, thresholds, tip, 
     (mm). Fills the chosen solutions' rows but where exact (N,) is True: a candidate that only the
     all-solutions route (numpy) settles; the caller solves those poses the twin's way."""
     lanes, rho = np.empty((2, _LANES, _BLOCK)), np.empty((2, 3, _BLOCK))
+    found = np.empty((2, 4, _BLOCK))
     one_pair = (np.ones(1), -np.ones(1))
-    joints, alpha, phi, trig = np.empty((2, 5)), np.empty(2), np.empty((2, 2)), np.empty((2, 4))
-    reachable, platform = np.empty(2, np.bool_), np.empty((2, 3))
-    scratch, settle_scratch = np.empty((4, 4, 4)), np.empty((12, 9))
+    joints, alpha, phi, cos_alpha = np.empty((2, 5)), np.empty(2), np.empty((2, 2)), np.empty(2)
+    reachable, platform, found_by_pair = np.empty(2, np.bool_), np.empty((2, 3)), np.empty((2, 4))
+    settle_scratch = np.empty((12, 9))
     for start in range(0, tip.shape[0], _BLOCK):
         size = min(_BLOCK, tip.shape[0] - start)
         for p in range(2):
-            _gather(tip, axis, one_pair[p], start, size, lanes[p])
-            _solve_block(c, theta2_at_pole, start, size, lanes[p], rho[p])
+            lane, sliders, margins = lanes[p], rho[p], found[p]
+            _gather(tip, axis, one_pair[p], start, size, lane)
+            _solve_block(c, theta2_at_pole, start, size, lane, sliders)
+            for j in range(size):  # both pairs' margins in lanes (garbage where a pair does not reach: not read)
+                ca, sa, cp, sp = lane[_COS, j], lane[_SIN, j], lane[_C1, j], lane[_S1, j]
+                serial, parallel, machine, rod = _margins_of(
+                    c, sliders[0, j], sliders[1, j], sliders[2, j], lane[_XP, j], lane[_Y, j], lane[_Z, j], ca, sa,
+                    ca * cp + sa * sp, sa * cp - ca * sp, cp, sp)  # theta1 = alpha - phi1
+                margins[0, j], margins[1, j], margins[2, j], margins[3, j] = serial, parallel, machine, rod
         for j in range(size):
             n = start + j
             exact[n] = False
@@ -535,19 +545,20 @@ def _inverse_kinematics(c, offsets, has_offsets, lower, upper, thresholds, tip, 
                     exact[n] = True
                 reachable[p] = ok
                 alpha[p] = lane[_ALPHA, j] if ok else math.nan
+                cos_alpha[p] = lane[_COS, j]
                 phi[p, 0], phi[p, 1] = lane[_PHI1, j], _wrap(lane[_PHI2, j])
-                for k, row in enumerate((_COS, _SIN, _C1, _S1)):
-                    trig[p, k] = lane[row, j]
                 true = (rho[p, 0, j], rho[p, 1, j], rho[p, 2, j], alpha[p] - phi[p, 0], -phi[p, 1])
                 for k in range(5):  # Geometry.readings of full.machine_ik_working's joints, NaN where unreachable
                     value = true[k] if ok else math.nan
                     joints[p, k] = value - offsets[k] if has_offsets else value
+                for k in range(4):
+                    found_by_pair[p, k] = found[p, k, j]
                 platform[p, 0] = lane[_XP, j]
                 platform[p, 1], platform[p, 2] = (lane[_Y, j], lane[_Z, j]) if ok else (math.nan, math.nan)
             if not exact[n]:
-                _choose(c, offsets, has_offsets, lower, upper, thresholds, joints, alpha, phi, trig, reachable,
-                        platform, hint[n], has_hint, scratch, n, joints_out, alpha_out, phi_out, pair_out,
-                        status_out, margins_out, platform_out)
+                _choose(c, lower, upper, thresholds, joints, alpha, phi, cos_alpha, found_by_pair, reachable, platform,
+                        hint[n], has_hint, n, joints_out, alpha_out, phi_out, pair_out, status_out, margins_out,
+                        platform_out)
 
 
 @_jit
