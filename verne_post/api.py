@@ -258,7 +258,7 @@ def _inverse_kinematics_compiled(machine: Machine, tip: np.ndarray, axis: np.nda
     t = machine.singularity
     *found, exact = kernels.inverse_kinematics(  # type: ignore[misc]
         geom, *joint_bounds(machine), (t.serial_min, t.parallel_min, t.machine_min, t.rod_clearance_min), tip, axis,
-        np.broadcast_to(true_theta2(geom, hint), hint.shape), hint, theta2_hint is not None)
+        true_theta2(geom, hint), hint, theta2_hint is not None)
     result = IKResult(*found[:5], Margins(*found[5]), found[6])  # type: ignore[call-arg]
     rows = np.flatnonzero(exact)
     if rows.size:

@@ -431,14 +431,6 @@ def _wrap_mod(angle: float) -> float:
 
 
 @_inline
-def _finite(value: float) -> float:
-    """numpy.nan_to_num of one value: NaN as 0, +-inf as the largest finite float."""
-    if math.isnan(value):
-        return 0.0
-    return max(min(value, 1.7976931348623157e308), -1.7976931348623157e308)
-
-
-@_inline
 def _within(joints, n, lower, upper) -> bool:
     """api.within_limits of row n of (N, 5) finite readings (mm, rad)."""
     inside = True
@@ -453,7 +445,7 @@ def _cost(status: int, theta1: float, theta2: float, hint: float, has_hint: bool
     with a hint theta2's distance to it."""
     preference = abs((hint + _wrap_mod(theta2 - hint)) - hint) if has_hint else abs(theta1)
     penalty = 0.0 if status == 0 else (1e9 if status == 1 else (1e6 if status == 2 else 1e3))
-    return penalty + _finite(preference)
+    return penalty + _clamped(preference)
 
 
 @_inline
@@ -593,11 +585,7 @@ def _fk_working(c, joints, alpha_guess, warm, platform, alpha_out, good, tip, ax
     delta, da, dt = c[9], c[10], c[11]
     for n in range(joints.shape[0]):
         rho1, rho2, rho3 = joints[n, 0], joints[n, 1], joints[n, 2]
-        a0 = alpha_guess[n] if warm else 0.0
-        if math.isnan(a0):
-            a0 = 0.0
-        elif math.isinf(a0):
-            a0 = 1.7976931348623157e308 if a0 > 0 else -1.7976931348623157e308
+        a0 = _clamped(alpha_guess[n]) if warm else 0.0
         first = 1e-4 if warm else 0.02
         a1 = a0 + first
         ca, sa = math.cos(a0), math.sin(a0)

@@ -42,10 +42,9 @@ def adjugate_entries(a00, a01, a02, a03, a10, a11, a12, a13, a20, a21, a22, a23,
 
 
 def fill_adjugate(a, adj):
-    """Fills ``adj`` with the adjugate of the 4 x 4 matrix ``a`` and returns its determinant
-    (:func:`adjugate_entries`): ``a[i, j]`` and ``adj[i, j]`` are numbers (one matrix, in a
-    compiled loop of :mod:`._loops`) or (N,) arrays (N matrices stored entry-first, (4, 4, N), as
-    :mod:`.jacobian` keeps them: far cheaper than a LAPACK call per matrix)."""
+    """Fills ``adj`` with the adjugate of N 4 x 4 matrices ``a`` stored entry-first, (4, 4, N), as
+    :mod:`.jacobian` keeps them (far cheaper than a LAPACK call per matrix), and returns their
+    determinants (:func:`adjugate_entries`)."""
     entries = adjugate_entries(a[0, 0], a[0, 1], a[0, 2], a[0, 3], a[1, 0], a[1, 1], a[1, 2], a[1, 3],
                                a[2, 0], a[2, 1], a[2, 2], a[2, 3], a[3, 0], a[3, 1], a[3, 2], a[3, 3])
     for k in range(16):

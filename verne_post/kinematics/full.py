@@ -182,22 +182,22 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
     xp, a, b, x1sq = coefficients.T
     rho = joints[:, :3]
     retry = np.flatnonzero(candidates)
-    settled = None
-    if retry.size and exact_fallback:  # the compiled route tests every candidate in one loop
-        settled = kernels.settled(geom, coefficients, alpha, joints, candidates)
-    if settled is not None:
-        retry = np.flatnonzero(candidates & ~settled)
-    elif retry.size and exact_fallback:
+    if retry.size and exact_fallback:
         # Newton found a root of eq. 31 in (-alpha_max, alpha_max) where a leg does not reach: if
         # it is the only root there, no working solution exists and the all-solutions route (the
         # sextic's eigenvalues, most of this function's time where poses are out of reach) would
-        # find none
-        residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
-        newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
-                       & ~np.all(np.isfinite(rho[retry]), axis=-1))
-        if newton_root.any():
-            rows = retry[newton_root]
-            retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows], alpha[rows])])
+        # find none. The compiled route tests every candidate in one loop.
+        settled = kernels.settled(geom, coefficients, alpha, joints, candidates)
+        if settled is not None:
+            retry = np.flatnonzero(candidates & ~settled)
+        else:
+            residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
+            newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
+                           & ~np.all(np.isfinite(rho[retry]), axis=-1))
+            if newton_root.any():
+                rows = retry[newton_root]
+                retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows],
+                                                                    alpha[rows])])
     if retry.size and exact_fallback:
         exact = _machine_ik_all(geom, tip[retry], axis[retry], pair=pair[retry], theta2_at_pole=theta2_at_pole[retry])
         wm = exact.working_mode
