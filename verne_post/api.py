@@ -26,6 +26,7 @@ from .kinematics import (
     unwrap_near,
 )
 from .kinematics.full import true_theta2
+from .kinematics.rows import all_of, any_of, norms
 from .machine import Machine
 
 
@@ -62,14 +63,14 @@ def placeable(machine: Machine, joints: np.ndarray) -> np.ndarray:
     the limit check reports those poses, and their metres-long moves would be bisected without end."""
     lower, upper = joint_bounds(machine)
     span = np.where(np.isfinite(upper - lower), upper - lower, np.inf)
-    absurd = np.any((joints < lower - span) | (joints > upper + span), axis=-1)
+    absurd = any_of((joints < lower - span) | (joints > upper + span))
     return np.where(absurd[:, None], np.nan, joints)
 
 
 def within_limits(machine: Machine, joints: np.ndarray) -> np.ndarray:
     """True where every joint of (N, 5) (mm, rad) is inside the machine's travel."""
     lower, upper = joint_bounds(machine)
-    return np.all((joints >= lower) & (joints <= upper), axis=-1)
+    return all_of((joints >= lower) & (joints <= upper))
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,7 @@ def _as_poses(tip: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray
     axis = np.atleast_2d(np.asarray(axis, dtype=float))
     if tip.shape != axis.shape or tip.shape[-1] != 3:
         raise ValueError("tip and axis must both be (N, 3)")
-    norm = np.linalg.norm(axis, axis=-1, keepdims=True)
+    norm = norms(axis)[:, None]
     if np.any(norm == 0) or not np.all(np.isfinite(norm)) or not np.all(np.isfinite(tip)):
         raise ValueError("tool tip and axis must be finite and the axis of non-zero length")
     return tip, axis / norm

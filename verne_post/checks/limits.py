@@ -14,6 +14,7 @@ import numpy as np
 
 from ..api import IKResult, Status, classify, forward_kinematics, joint_bounds, pose_margins
 from ..kinematics import Margins
+from ..kinematics.rows import norms
 from ..machine import Machine
 
 _JOINT_WORDS = ("slider rho1", "slider rho2", "slider rho3", "tilt theta1", "rotary theta2")
@@ -135,7 +136,7 @@ def theta2_rate_warnings(machine: Machine, joints: np.ndarray, tip: np.ndarray, 
     (the tool axis passing close to the table normal, outside the pole cone); one per line."""
     max_rate = np.radians(machine.pole.max_theta2_rate)
     turn = np.abs(np.diff(joints[:, 4]))
-    travel = np.linalg.norm(np.diff(tip, axis=0), axis=1)
+    travel = norms(np.diff(tip, axis=0))
     # A rotation with the tip standing still is a programmed reorientation, not a whip.
     fast = ~rapid[1:] & (travel > 1e-6) & (turn > max_rate * travel) & (turn > 1e-6)
     rate = np.degrees(turn) / np.maximum(travel, 1e-9)

@@ -30,6 +30,7 @@ from .module import (
     working_assembly_exact,
     working_sliders,
 )
+from .rows import all_of, finite_rows
 from .tolerances import POLE_EPS, ROOT_PIECES
 from .trigpoly import TrigPoly, real_half_angle_roots, roots_within
 
@@ -124,9 +125,9 @@ def _only_working_root(geom: Geometry, a: np.ndarray, b: np.ndarray, x1sq: np.nd
     t = np.tan(0.5 * edges)
     at_edges = np.polynomial.polynomial.polyval(t, num.T)  # (N, pieces + 1): F F~ at the ends
     f = _signed_coupling(geom, a[:, None], b[:, None], x1sq[:, None], edges)[0]  # NaN: leg I out of reach
-    sure = np.all(np.abs(at_edges) > 1e-9, axis=1)
+    sure = all_of(np.abs(at_edges) > 1e-9)
     piece = np.searchsorted(edges, root) - 1
-    sure &= np.all(np.abs(root[:, None] - edges) > 1e-9, axis=1)
+    sure &= all_of(np.abs(root[:, None] - edges) > 1e-9)
     for j in range(ROOT_PIECES):
         count = roots_within(num, t[j], t[j + 1])
         sign_kept = f[:, j] * f[:, j + 1] > 0  # False where NaN
@@ -193,7 +194,7 @@ def machine_ik_working(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: 
         else:
             residual, yg = _signed_coupling(geom, a[retry], b[retry], x1sq[retry], alpha[retry])
             newton_root = ((np.abs(residual) <= 1e-9 * (np.abs(yg) + g.R1)) & (np.abs(alpha[retry]) < g.alpha_max)
-                           & ~np.all(np.isfinite(rho[retry]), axis=-1))
+                           & ~finite_rows(rho[retry]))
             if newton_root.any():
                 rows = retry[newton_root]
                 retry = np.setdiff1d(retry, rows[_only_working_root(geom, a[rows], b[rows], x1sq[rows],
@@ -238,11 +239,11 @@ def _newton_route(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.nd
             alpha = alpha - np.clip(f / df, -0.2, 0.2)
     platform = _platform_pose(geom, xp, a, b, alpha)
     rho = working_sliders(geom, platform, alpha)
-    good = np.all(np.isfinite(rho), axis=-1) & (np.abs(alpha) < g.alpha_max)
+    good = finite_rows(rho) & (np.abs(alpha) < g.alpha_max)
     good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
     good[good] = closure_ok(geom, platform[good], alpha[good], rho[good])
     joints = np.column_stack([rho, alpha - phi1, -phi2])
-    candidates = ~good & (x1sq <= k + two_rr) & np.all(np.isfinite(np.column_stack([tip, axis])), axis=-1)
+    candidates = ~good & (x1sq <= k + two_rr) & finite_rows(tip) & finite_rows(axis)
     return (joints, alpha, np.column_stack([phi1, phi2]), platform, np.column_stack([xp, a, b, x1sq]), good,
             candidates)
 

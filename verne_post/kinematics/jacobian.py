@@ -12,6 +12,7 @@ import numpy as np
 from . import kernels
 from .adjugate import fill_adjugate
 from .geometry import Geometry
+from .rows import dots
 
 
 def _rod_vectors(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
@@ -42,7 +43,7 @@ def module_jacobian(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho
     """
     rho = geom.true_joints(rho)
     rods, d_alpha, _ = _rod_vectors(geom, platform, alpha, rho)
-    a = np.concatenate([rods, np.sum(rods * d_alpha, axis=-1, keepdims=True)], axis=-1)
+    a = np.concatenate([rods, dots(rods, d_alpha)[..., None]], axis=-1)
     b = np.zeros((*rods.shape[:2], 3))
     b[:, 0, 0], b[:, 1, 0], b[:, 2, 1], b[:, 3, 2] = (-rods[:, k, 2] for k in range(4))
     return -np.linalg.solve(a, b)
@@ -89,7 +90,7 @@ def singularity_measures(geom: Geometry, platform: np.ndarray, alpha: np.ndarray
     rods, d_alpha, lengths = _rod_vectors(geom, platform, alpha, rho)
     units = rods / lengths[:, None]
     serial = np.min(np.abs(units[..., 2]), axis=-1)
-    a = np.concatenate([units, np.sum(units * d_alpha, axis=-1, keepdims=True) / geom.R1], axis=-1)
+    a = np.concatenate([units, dots(units, d_alpha)[..., None] / geom.R1], axis=-1)
     sv = np.linalg.svd(a, compute_uv=False)
     parallel = sv[:, -1] / sv[:, 0]
     return serial, parallel

@@ -21,6 +21,7 @@ import numpy as np
 
 from . import kernels
 from .geometry import Geometry
+from .rows import all_of, finite_rows
 from .tolerances import CLOSURE_TOL
 from .trigpoly import TrigPoly, real_half_angle_roots
 
@@ -47,7 +48,7 @@ def closure_ok(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.
     """True where all four closure equations hold to ``CLOSURE_TOL`` relative to L^2."""
     scale = np.array([geom.L1**2, geom.L1**2, geom.L2**2, geom.L3**2])
     residuals = closure_residuals(geom, platform, alpha, rho)
-    return np.all(np.abs(residuals) <= CLOSURE_TOL * scale, axis=-1)
+    return all_of(np.abs(residuals) <= CLOSURE_TOL * scale)
 
 
 def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -61,7 +62,7 @@ def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray,
 def is_working_mode(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """The machine's mode: s_i = -1 for every leg and R1 cos(alpha) > r1 (no rod crossing)."""
     signs = configuration_signs(geom, platform, alpha, rho)
-    return np.all(signs < 0, axis=-1) & (geom.R1 * np.cos(alpha) > geom.r1)
+    return all_of(signs < 0) & (geom.R1 * np.cos(alpha) > geom.r1)
 
 
 # --------------------------------------------------------------------------- coupling (eq. 6-8)
@@ -176,7 +177,7 @@ def module_ik_working(geom: Geometry, platform: np.ndarray) -> ModuleIK:
     magnitude = _alpha_from_w(w, 1.0)
     alpha = np.where(y > 0, -magnitude, magnitude)
     rho = working_sliders(geom, platform, alpha)
-    reachable = (w >= 0) & (geom.R1 * np.cos(alpha) > geom.r1) & np.all(np.isfinite(rho), axis=-1) & np.isfinite(w)
+    reachable = (w >= 0) & (geom.R1 * np.cos(alpha) > geom.r1) & finite_rows(rho) & np.isfinite(w)
     reachable &= closure_ok(geom, platform, alpha, np.where(reachable[:, None], rho, 0.0))
     rho = geom.readings(np.where(reachable[:, None], rho, np.nan))
     return ModuleIK(rho, np.where(reachable, alpha, np.nan), reachable)
@@ -248,7 +249,7 @@ def solutions_for_alpha(
         sg[double, leg] = 0.0
     rows, rho, sg = rows[keep], rho[keep], sg[keep]
     a = alpha[rows]
-    working = np.all(sg < 0, axis=-1) & (geom.R1 * np.cos(a) > geom.r1)
+    working = all_of(sg < 0) & (geom.R1 * np.cos(a) > geom.r1)
     return ModuleIKSolutions(index[rows], a, rho, sg.astype(np.int8), working)
 
 
@@ -402,7 +403,7 @@ def _module_fk_all(geom: Geometry, rho: np.ndarray) -> ModuleFKSolutions:
     platform = np.concatenate([platform, d_platform])
     alpha = np.concatenate([alpha, d_alpha])
     alpha = np.angle(np.exp(1j * alpha))
-    finite = np.all(np.isfinite(platform), axis=-1)
+    finite = finite_rows(platform)
     index, platform, alpha = index[finite], platform[finite], alpha[finite]
     ok = closure_ok(geom, platform, alpha, rho[index])
     index, platform, alpha = index[ok], platform[ok], alpha[ok]
@@ -498,7 +499,7 @@ def _secant_route(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | Non
         if not active.size:
             break
     alpha = np.angle(np.exp(1j * a1))
-    good = np.all(np.isfinite(platform), axis=-1)
+    good = finite_rows(platform)
     good[good] = closure_ok(geom, platform[good], alpha[good], rho[good]) & is_working_mode(
         geom, platform[good], alpha[good], rho[good]
     )

@@ -254,7 +254,16 @@ def split_durations(machine: Machine, guarded: Guarded, duration: np.ndarray, to
     if not split.any():
         return duration[guarded.owner]
     joints = guarded.blocks.joints
-    tip = forward_kinematics(machine, joints, tool_length=tool_length).tip
+    # The tip only where a share is taken: the rows of split blocks and the block end before each
+    # (a whole block's share is 1 either way). Each row's FK is its own (no warm start from a
+    # neighbour), so these rows get the numbers the whole program would; NaN elsewhere leaves
+    # the whole blocks' share 0, below their piece 1.
+    cut = np.zeros(len(duration), bool)
+    cut[guarded.owner[split]] = True
+    rows = cut[guarded.owner]
+    rows = np.flatnonzero(rows | np.r_[rows[1:], False])
+    tip = np.full((len(joints), 3), np.nan)
+    tip[rows] = forward_kinematics(machine, joints[rows], tool_length=tool_length[rows]).tip
     chord = np.r_[0.0, np.linalg.norm(np.diff(tip, axis=0), axis=1)]
     total = np.bincount(guarded.owner, chord, minlength=len(duration))[guarded.owner]
     with np.errstate(divide="ignore", invalid="ignore"):

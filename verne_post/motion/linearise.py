@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..api import IKResult, Status, concatenate, forward_kinematics
+from ..kinematics.rows import cross, dots, norms, squares
 from ..machine import Machine
 from .branch import PathIK, solve_with_theta2
 from .poses import MachinePoses
@@ -35,38 +36,39 @@ INSERT_BUDGET_PER_POSE, INSERT_BUDGET_MIN = 64, 100_000
 
 def slerp(a: np.ndarray, b: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Spherical interpolation of unit vectors (N, 3) at fractions u (N,)."""
-    cos = np.clip(np.sum(a * b, axis=-1), -1.0, 1.0)
+    cos = np.clip(dots(a, b), -1.0, 1.0)
     omega = np.arccos(cos)
     small = omega < 1e-9
     sin = np.where(small, 1.0, np.sin(omega))
     wa = np.where(small, 1.0 - u, np.sin((1.0 - u) * omega) / sin)
     wb = np.where(small, u, np.sin(u * omega) / sin)
     out = wa[:, None] * a + wb[:, None] * b
-    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+    return out / norms(out)[:, None]
 
 
 def distance_to_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distance (mm) from points p (N, 3) to segments [a, b]."""
     d = b - a
-    length2 = np.sum(d * d, axis=-1)
-    t = np.clip(np.sum((p - a) * d, axis=-1) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-    return np.linalg.norm(p - a - t[:, None] * d, axis=-1)
+    length2 = squares(d)
+    t = np.clip(dots(p - a, d) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
+    return norms(p - a - t[:, None] * d)
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return 2.0 * np.arcsin(np.clip(np.linalg.norm(u - v, axis=-1) / 2.0, 0.0, 1.0))
+    return 2.0 * np.arcsin(np.clip(norms(u - v) / 2.0, 0.0, 1.0))
 
 
 def angle_to_arc(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle (rad) from unit vectors p to the shorter great-circle arcs from a to b."""
-    normal = np.cross(a, b)
-    norm = np.linalg.norm(normal, axis=-1)
+    normal = cross(a, b)
+    norm = norms(normal)
     ends = np.minimum(_angle(p, a), _angle(p, b))
     safe = norm > 1e-12
     unit = normal / np.where(safe, norm, 1.0)[:, None]
-    out_of_plane = np.arcsin(np.clip(np.abs(np.sum(p * unit, axis=-1)), 0.0, 1.0))
-    q = p - np.sum(p * unit, axis=-1, keepdims=True) * unit
-    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-300)
+    along = dots(p, unit)
+    out_of_plane = np.arcsin(np.clip(np.abs(along), 0.0, 1.0))
+    q = p - along[:, None] * unit
+    q = q / np.maximum(norms(q), 1e-300)[:, None]
     inside = np.abs(_angle(a, q) + _angle(q, b) - _angle(a, b)) < 1e-9
     return np.where(safe & inside, out_of_plane, ends)
 

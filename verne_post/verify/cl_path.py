@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kinematics.rows import finite_rows, norms
 from ..machine import Machine
 from ..motion.linearise import angle_to_arc, distance_to_segment
 from .gcode_reader import GcodeProgram
@@ -23,7 +24,7 @@ from .sampling import Curves, Motion, Poses
 
 
 def _angle(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return 2.0 * np.arcsin(np.clip(np.linalg.norm(u - v, axis=-1) / 2.0, 0.0, 1.0))
+    return 2.0 * np.arcsin(np.clip(norms(u - v) / 2.0, 0.0, 1.0))
 
 
 def _match(reference: Reference, ends: Poses, known: np.ndarray, tol: float, axis_tol: float) -> np.ndarray:
@@ -44,7 +45,7 @@ def _match(reference: Reference, ends: Poses, known: np.ndarray, tol: float, axi
     pose, block = _near(np.hstack([reference.tip, weight * reference.axis]),
                         np.hstack([ends.tip[usable], weight * ends.axis[usable]]), tol)
     block = usable[block]
-    good = ((np.linalg.norm(reference.tip[pose] - ends.tip[block], axis=1) <= tol)
+    good = ((norms(reference.tip[pose] - ends.tip[block]) <= tol)
             & (_angle(reference.axis[pose], ends.axis[block]) <= axis_tol))
     pose, block = pose[good], block[good]
     if pose.size == 0:
@@ -259,7 +260,7 @@ def path_findings(program: GcodeProgram, machine: Machine, reference: Reference,
     point_block = np.r_[end_blocks, curves.block[inner_follows]]
     point_tip = np.concatenate([ends.tip[end_blocks], curves.samples.tip[inner_follows]])
     point_axis = np.concatenate([ends.axis[end_blocks], curves.samples.axis[inner_follows]])
-    ok = np.isfinite(point_tip).all(axis=1) & ~pieces.lost[point_block]
+    ok = finite_rows(point_tip) & ~pieces.lost[point_block]
     point_block, point_tip, point_axis = point_block[ok], point_tip[ok], point_axis[ok]
     tip_error, axis_error, nearest = _deviation(reference, pieces, point_block, point_tip, point_axis, tol,
                                                 axis_tol)
@@ -338,7 +339,7 @@ def _rapids(program: GcodeProgram, reference: Reference, motion: Motion, pieces:
         return None, None
     point = np.concatenate([ends.tip[blocks], curves.samples.tip[inner]])
     bound = np.r_[np.zeros(len(blocks)), np.repeat(motion.bound_tip, curves.n - 1)[inner]]
-    known = np.isfinite(point).all(axis=1)  # an unreachable sample is a finding of its own
+    known = finite_rows(point)  # an unreachable sample is a finding of its own
     block, point, bound = block[known], point[known], bound[known]
     count = len(block)
     on_line, on_ray = np.full(count, np.inf), np.full(count, np.inf)
@@ -462,7 +463,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
     """
     moves = curves.moves
     timed = follows & (program.duration[moves] > 0) & ~pieces.lost[moves]
-    step = np.linalg.norm(np.diff(curves.tip, axis=0), axis=1)  # consecutive points; across moves dropped
+    step = norms(np.diff(curves.tip, axis=0))  # consecutive points; across moves dropped
     within = np.ones(len(step), bool)
     within[(curves.start + curves.n)[:-1]] = False
     step = np.where(within, step, 0.0)
@@ -473,7 +474,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
     travels, turns = np.zeros(len(moves), bool), np.zeros(len(moves), bool)
     for rows, owner, a, b in pieces.chunks(moves):
         size = rows.stop - rows.start
-        travel = np.linalg.norm(reference.tip[b] - reference.tip[a], axis=1) >= STILL_TIP
+        travel = norms(reference.tip[b] - reference.tip[a]) >= STILL_TIP
         per_minute = np.where(travel & ~reference.inverse_time[b], reference.feed[b], np.nan)
         np.fmin.at(lowest, np.arange(rows.start, rows.stop)[owner], per_minute)
         inverse[rows] = np.bincount(owner, travel & reference.inverse_time[b], minlength=size) > 0
@@ -486,7 +487,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
         # the rounding of the written block ends, as a share of the length the feed allows
         ratio_slack = FEED_SLACK + FEED_LENGTH_SLACK / (lowest * minutes)
         peak_ratio = np.where(timed & np.isfinite(lowest), peak / lowest, np.nan)
-        turn = np.degrees(np.linalg.norm(program.joints[moves, 3:] - program.joints[moves - 1, 3:], axis=1))
+        turn = np.degrees(norms(program.joints[moves, 3:] - program.joints[moves - 1, 3:]))
         rotary_ratio = np.where(timed & still, turn / minutes / machine.timing.rotary_feed, np.nan)
     for i in np.flatnonzero(ratio > 1 + ratio_slack):
         m = moves[i]
@@ -501,7 +502,7 @@ def _feed(program: GcodeProgram, reference: Reference, machine: Machine, matched
                                 value=float(rotary_ratio[i]), limit=1.0))
     # inverse time: whole CL moves between two reached poses
     k = np.flatnonzero(reference.inverse_time[1:] & (matched[1:] >= 0) & (matched[:-1] >= 0)
-                       & (np.linalg.norm(np.diff(reference.tip, axis=0), axis=1) >= STILL_TIP)) + 1
+                       & (norms(np.diff(reference.tip, axis=0)) >= STILL_TIP)) + 1
     elapsed = np.r_[0.0, np.cumsum(np.nan_to_num(program.duration))]
     taken = elapsed[matched[k] + 1] - elapsed[matched[k - 1] + 1]
     with np.errstate(divide="ignore"):

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..kinematics.rows import any_of, norms
 from ..output.controller import LINUXCNC, Controller
 
 __all__ = ["GcodeProgram", "ReadState", "ToolNote", "read_gcode"]
@@ -426,7 +427,7 @@ def _resolve(source: str, table: np.ndarray, line: np.ndarray, state: np.ndarray
     scale, inverse_time, epoch = of_state("scale", float), of_state("inverse_time", bool), of_state("feed_epoch", int)
     scale[0], epoch[0] = 1.0, -1 if before is None else before.feed_epoch
     everywhere = np.zeros(len(table), np.int64)
-    axes = np.any(~np.isnan(table[:, 1:6]), axis=1)
+    axes = any_of(~np.isnan(table[:, 1:6]))
     moves = axes | ~np.isnan(table[:, 0])  # a G0/G1 word alone is a move of length zero (as LinuxCNC does)
     moves[0] = False
     motion = _last_given(table[:, 0], everywhere)
@@ -477,10 +478,10 @@ def _durations(position: np.ndarray, scale: np.ndarray, rapid: np.ndarray, inver
     """Seconds of each G1 block (positions mm / deg, F as programmed in units of ``scale`` mm;
     ``start``: the position before the first, NaN where unknown)."""
     step = np.diff(position, axis=0, prepend=start[None])
-    linear = np.linalg.norm(step[:, :3], axis=1)
+    linear = norms(step[:, :3])
     with np.errstate(divide="ignore", invalid="ignore"):
-        per_minute = np.where(np.any(step[:, :3] != 0, axis=1), linear / (feed * scale),
-                              np.linalg.norm(step[:, 3:], axis=1) / feed)
+        per_minute = np.where(any_of(step[:, :3] != 0), linear / (feed * scale),
+                              norms(step[:, 3:]) / feed)
         minutes = np.where(inverse_time, 1.0 / feed, per_minute)
     minutes[rapid | ~(feed > 0)] = np.nan
     return 60.0 * minutes

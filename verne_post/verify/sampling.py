@@ -10,6 +10,7 @@ import numpy as np
 
 from ..api import classify, forward_kinematics, pose_margins
 from ..kinematics import Margins
+from ..kinematics.rows import finite_rows, norms
 from ..machine import Machine
 from .gcode_reader import GcodeProgram
 from .reference import FIRST_INTERVALS, MAX_INTERVALS, POSE_CHUNK, RAPID_INTERVALS, SAMPLING_SHARE
@@ -124,7 +125,7 @@ class Curves:
         if len(owner):
             for d2, points in ((d2_tip, tip), (d2_axis, axis)):
                 second = points[inside - 1] - 2 * points[inside] + points[inside + 1]
-                d2[:] = np.nan_to_num(np.maximum.reduceat(np.linalg.norm(second, axis=1), first), nan=np.inf)
+                d2[:] = np.nan_to_num(np.maximum.reduceat(norms(second), first), nan=np.inf)
         return cls(moves, n, d2_tip, d2_axis, tip, axis, samples)
 
 
@@ -142,7 +143,7 @@ class Motion:
         """Sample every move densely enough for the sampling error to stay below
         SAMPLING_SHARE of ``tol`` (mm) and ``axis_tol`` (rad); see the module docstring."""
         q = program.joints
-        known = np.all(np.isfinite(q), axis=1) & np.isfinite(lengths)
+        known = finite_rows(q) & np.isfinite(lengths)
         ends = Poses.at(machine, q, lengths, known)
         moves = np.flatnonzero(known[1:] & known[:-1]) + 1
         rapid = program.rapid[moves]
