@@ -10,6 +10,7 @@ alpha) (0, 0, Delta). Units: mm, radians.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -96,15 +97,22 @@ def to_cradle(points: np.ndarray, theta2: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Placed:
-    """The moving bodies of N joint sets. ``head``: the stack's cylinders in the table frame (N,
-    H, 2, 3) axis end points; ``links``: the rods and the platform as capsules in the base frame
-    (N, 5, 2, 3) (leg I's two rods, legs II and III, the platform); the platform also in the table
-    frame, for the table-side checks; ``theta2`` the table's true turn."""
+    """The moving bodies of N joint sets. ``parts``: the stack's cylinders' axis end points in the
+    table frame, x, y and z apart (3, H, 2, N) (:attr:`head` has them (N, H, 2, 3)); ``links``:
+    the rods and the platform as capsules in the base frame (N, 5, 2, 3) (leg I's two rods, legs II
+    and III, the platform); the platform also in the table frame, for the table-side checks;
+    ``theta2`` the table's true turn."""
 
-    head: np.ndarray  # (N, H, 2, 3) table frame
+    parts: np.ndarray  # (3, H, 2, N) table frame
     links: np.ndarray  # (N, 5, 2, 3) base frame
     platform_table: np.ndarray  # (N, 2, 3) the platform (the last link) in the table frame
     theta2: np.ndarray  # (N,) rad, true
+
+    @cached_property
+    def head(self) -> np.ndarray:
+        """(N, H, 2, 3) mm, table frame: the stack's cylinders' axis end points (built on demand:
+        the collision check takes :attr:`parts`, in the cradle frame and for the levers)."""
+        return np.ascontiguousarray(self.parts.transpose(3, 1, 2, 0))
 
 
 LINK_NAMES = ("leg I rod 1", "leg I rod 2", "leg II", "leg III", "platform")
@@ -139,30 +147,31 @@ def place_links(bodies: BodiesConfig, geometry: Geometry, rho: np.ndarray, platf
     5.35 mm from leg I's at the default geometry, and meet it within the margin)."""
     g, p = geometry, bodies.platform
     ca, sa = np.cos(alpha), np.sin(alpha)
-    ey = np.column_stack([np.zeros_like(ca), ca, sa])  # Rot(x, alpha) e_y
-    ex = np.array([1.0, 0.0, 0.0])
+    px, py, pz = platform[:, 0], platform[:, 1], platform[:, 2]
 
-    def on_platform(x: float, y: float) -> np.ndarray:
-        return platform + x * ex + y * ey
+    def on_platform(x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, ...]:
+        # P + x e_x + y Rot(x, alpha) e_y, component by component in that order (the same sums
+        # as of whole vectors, zero terms included: they keep the signs of zeros)
+        return (px + x * 1.0) + y * 0.0, (py + x * 0.0) + y * ca, (pz + x * 0.0) + y * sa
 
     d1, d2 = p.D1 - g.D1_minus_d1, p.D2 - g.D2_minus_d2
-    one = np.ones(len(rho))
-
-    def on_slider(x: float, y: float, k: int) -> np.ndarray:
-        return np.column_stack([x * one, y * one, rho[:, k]])
-
-    joints = np.stack([
-        np.stack([on_slider(d1, g.r1, 0), on_platform(p.D1, g.R1)], 1),
-        np.stack([on_slider(d1, -g.r1, 0), on_platform(p.D1, -g.R1)], 1),
-        np.stack([on_slider(d2, -g.r4, 1), on_platform(p.D2, -g.R2)], 1),
-        np.stack([on_slider(d2, g.r4, 2), on_platform(p.D2, g.R2)], 1),
-    ], 1)  # (N, 4, 2, 3) the rods' joint centres
-    span = joints[:, :, 1] - joints[:, :, 0]
-    inset = (link_radii(bodies)[:4] / np.linalg.norm(span, axis=2))[..., None] * span
-    rods = np.stack([joints[:, :, 0] + inset, joints[:, :, 1] - inset], 2)
-    platform_link = np.stack([on_platform(0.5 * (p.D1 + p.D2), -max(g.R1, g.R2)),
-                              on_platform(0.5 * (p.D1 + p.D2), max(g.R1, g.R2))], 1)
-    return np.concatenate([rods, platform_link[:, None]], 1)
+    # the rods' joint centres (rows: the rods), x, y, z apart (4, N) or (4, 1)
+    slider_x, slider_y = np.array([[d1], [d1], [d2], [d2]]), np.array([[g.r1], [-g.r1], [-g.r4], [g.r4]])
+    slider = (slider_x, slider_y, rho[:, [0, 0, 1, 2]].T)
+    top = on_platform(np.array([[p.D1], [p.D1], [p.D2], [p.D2]]), np.array([[g.R1], [-g.R1], [-g.R2], [g.R2]]))
+    span = [top[c] - slider[c] for c in range(3)]
+    # the norm as np.linalg.norm sums the squares over an axis: left to right
+    length = np.sqrt((span[0] * span[0] + span[1] * span[1]) + span[2] * span[2])
+    ratio = link_radii(bodies)[:4, None] / length
+    out = np.empty((len(rho), 5, 2, 3))
+    for c in range(3):
+        inset = ratio * span[c]
+        out[:, :4, 0, c] = (slider[c] + inset).T
+        out[:, :4, 1, c] = (top[c] - inset).T
+    half = max(g.R1, g.R2)
+    for c, ends in enumerate(on_platform(np.array([[0.5 * (p.D1 + p.D2)]] * 2), np.array([[-half], [half]]))):
+        out[:, 4, :, c] = ends.T
+    return out
 
 
 def platform_speeds(geometry: Geometry, rho: np.ndarray, platform: np.ndarray, alpha: np.ndarray
@@ -194,5 +203,11 @@ def place(bodies: BodiesConfig, geometry: Geometry, joints: np.ndarray, platform
     tip_base = platform + delta[:, None] * ez
     tip = to_table(tip_base, rotation, origin)
     axis = -np.einsum("nji,nj->ni", rotation, ez)  # from the tip toward the spindle
-    head = tip[:, None, None] + np.stack([stack_start, stack_end], -1)[..., None] * axis[:, None, None]
-    return Placed(head, links, to_table(links[:, 4], rotation, origin), joints[:, 4])
+    # tip + span * axis, x, y and z apart: a component at a time, so that every operation runs
+    # over rows of N (numpy broadcasts over small leading axes slowly)
+    spans = np.stack([stack_start.T, stack_end.T], 1)  # (H, 2, N)
+    parts = np.empty((3, *spans.shape))
+    for c in range(3):
+        np.multiply(spans, axis[:, c], out=parts[c])
+        np.add(tip[:, c], parts[c], out=parts[c])
+    return Placed(parts, links, to_table(links[:, 4], rotation, origin), joints[:, 4])

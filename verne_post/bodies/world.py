@@ -30,7 +30,6 @@ from .layout import (
     place,
     place_links,
     platform_speeds,
-    to_cradle,
     tool_stack,
 )
 from .setup import Setup
@@ -128,31 +127,55 @@ class World:
                 return Samples(bodies, rad, module.alpha, levers)
             delta = g.spindle_nose + lengths[stack]
             placed = place(self.bodies, g, true, module.platform, module.alpha, delta, start[stack], end[stack], links)
-            ez = np.column_stack([zero, -np.sin(module.alpha), np.cos(module.alpha)])
             in_table = [wanted(f"{name}@table") for name in slots]
             in_cradle = [wanted(f"{name}@cradle") for name in slots]
-            for k, name in enumerate(slots):
-                if not (in_table[k] or in_cradle[k]):
-                    continue
-                r = radius[stack, k]
-                spans = np.stack([delta - start[stack, k], delta - end[stack, k]], 1)  # from P along ez
-                head_base = module.platform[:, None] + spans[..., None] * ez[:, None]
-                lever = np.column_stack([speed_p + speed_alpha * (np.abs(spans).max(axis=1) + r),
-                                         _from_cradle_axis(head_base, g.da) + r,
-                                         _from_table_axis(placed.head[:, k]) + r])
+            used = [k for k in range(len(slots)) if in_table[k] or in_cradle[k]]
+            # the wanted slots' rows (K, N) side by side: the same operations on the same numbers
+            # as one slot at a time, in a few whole-array calls
+            r = np.ascontiguousarray(radius[stack][:, used].T)
+            span_start, span_end = delta - start[stack][:, used].T, delta - end[stack][:, used].T
+            # the slots' axis ends from P along ez = Rot(x, alpha) e_z (y and z: the cradle's axis is x)
+            ez_y, ez_z = -np.sin(module.alpha), np.cos(module.alpha)
+            p_y, p_z = module.platform[:, 1], module.platform[:, 2]
+            from_cradle = np.maximum(np.hypot(p_y + span_start * ez_y, p_z + span_start * ez_z - g.da),
+                                     np.hypot(p_y + span_end * ez_y, p_z + span_end * ez_z - g.da)) + r
+            every = used == list(range(len(slots)))  # (as a rule) then views, not copies
+            x, y, z = placed.parts if every else placed.parts[:, used]  # (K, 2, N) each, table frame
+            from_table = np.maximum(np.hypot(x[:, 0], y[:, 0]), np.hypot(x[:, 1], y[:, 1])) + r
+            lever = np.empty((len(used), len(true), 3))  # per slot a contiguous (N, 3)
+            lever[..., 0] = speed_p + speed_alpha * (np.maximum(np.abs(span_start), np.abs(span_end)) + r)
+            lever[..., 1], lever[..., 2] = from_cradle, from_table
+            lever_cradle = np.empty_like(lever)  # lever * (1, 1, 0), a column at a time
+            lever_cradle[..., 0], lever_cradle[..., 1] = lever[..., 0] * 1.0, from_cradle * 1.0
+            lever_cradle[..., 2] = from_table * 0.0
+            # the cradle frame (the table's turn undone): the slots wanted there and the platform,
+            # cos and sin of theta2 once for all
+            cos2, sin2 = np.cos(placed.theta2), np.sin(placed.theta2)
+            cradle_slots = [j for j, k in enumerate(used) if in_cradle[k]]
+            cradle = np.empty((len(cradle_slots) + 1, len(true), 2, 3))  # per body a contiguous (N, 2, 3)
+            # to_cradle's arithmetic, a body's end at a time: every operation over a row of N
+            ends = [(x[j, e], y[j, e], z[j, e]) for j in cradle_slots for e in range(2)]
+            ends += [(placed.platform_table[:, e, 0], placed.platform_table[:, e, 1], placed.platform_table[:, e, 2])
+                     for e in range(2)]
+            for i, (end_x, end_y, end_z) in enumerate(ends):
+                out = cradle[i // 2, :, i % 2]
+                out[:, 0] = cos2 * end_x - sin2 * end_y
+                out[:, 1] = sin2 * end_x + cos2 * end_y
+                out[:, 2] = end_z
+            for j, k in enumerate(used):
                 if in_table[k]:
-                    bodies[f"{name}@table"], rad[f"{name}@table"], levers[f"{name}@table"] = placed.head[:, k], r, lever
-                if in_cradle[k]:
-                    bodies[f"{name}@cradle"] = to_cradle(placed.head[:, k], placed.theta2)
-                    rad[f"{name}@cradle"], levers[f"{name}@cradle"] = r, lever * [1.0, 1.0, 0.0]
+                    key = f"{slots[k]}@table"
+                    bodies[key], rad[key], levers[key] = placed.head[:, k], r[j], lever[j]
+            for i, j in enumerate(cradle_slots):
+                key = f"{slots[used[j]]}@cradle"
+                bodies[key], rad[key], levers[key] = cradle[i], r[j], lever_cradle[j]
             r = radii[4]
-            lever = np.column_stack([speed_p + speed_alpha * (platform_half + r),
-                                     _from_cradle_axis(links[:, 4], g.da) + r,
-                                     _from_table_axis(placed.platform_table) + r])
-            bodies["platform@table"], bodies["platform@cradle"] = (placed.platform_table,
-                                                                   to_cradle(placed.platform_table, placed.theta2))
+            platform_lever = np.column_stack([speed_p + speed_alpha * (platform_half + r),
+                                              _from_cradle_axis(links[:, 4], g.da) + r,
+                                              _from_table_axis(placed.platform_table) + r])
+            bodies["platform@table"], bodies["platform@cradle"] = placed.platform_table, cradle[-1]
             rad["platform@table"] = rad["platform@cradle"] = np.full(len(true), r)
-            levers["platform@table"], levers["platform@cradle"] = lever, lever * [1.0, 1.0, 0.0]
+            levers["platform@table"], levers["platform@cradle"] = platform_lever, platform_lever * [1.0, 1.0, 0.0]
             return Samples(bodies, rad, module.alpha, levers)
 
         return sample
@@ -198,12 +221,12 @@ class World:
 def _from_cradle_axis(ends: np.ndarray, da: float) -> np.ndarray:
     """(N,) mm: the larger distance of two base-frame axis end points (N, 2, 3) from the cradle's
     axis (x through (0, 0, da))."""
-    return np.hypot(ends[..., 1], ends[..., 2] - da).max(axis=1)
+    return np.maximum(np.hypot(ends[:, 0, 1], ends[:, 0, 2] - da), np.hypot(ends[:, 1, 1], ends[:, 1, 2] - da))
 
 
 def _from_table_axis(ends: np.ndarray) -> np.ndarray:
     """(N,) mm: the larger distance of two table-frame axis end points (N, 2, 3) from the table's axis."""
-    return np.hypot(ends[..., 0], ends[..., 1]).max(axis=1)
+    return np.maximum(np.hypot(ends[:, 0, 0], ends[:, 0, 1]), np.hypot(ends[:, 1, 0], ends[:, 1, 1]))
 
 
 def plain(name: str) -> str:
