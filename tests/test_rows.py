@@ -57,3 +57,16 @@ def test_the_row_sums_leave_their_inputs_alone() -> None:
     kept, kept_mask = a.copy(), mask.copy()
     rows.squares(a), rows.all_of(mask), rows.any_of(mask)
     assert np.array_equal(a, kept) and np.array_equal(mask, kept_mask)
+
+
+def test_take_rows_are_the_rows_numpy_indexes() -> None:
+    rng = np.random.default_rng(4)
+    for shape in ((0, 3), (1, 3), (50, 3), (1000, 5), (300, 2, 3), (200,)):
+        a = _spread(rng, shape)
+        n = shape[0]
+        for index in (rng.integers(-n, n, 3 * n) if n else np.zeros(0, int), np.zeros(0, int),
+                      rng.permutation(n), rng.random(n) < 0.5, np.ones(n, bool), slice(1, None, 2)):
+            taken = rows.take_rows(a, index)
+            assert taken.shape == a[index].shape and np.array_equal(taken, a[index])
+            if isinstance(index, np.ndarray) and taken.size:
+                assert not np.shares_memory(taken, a)  # a copy, as a[index] is

@@ -26,7 +26,7 @@ from .kinematics import (
     unwrap_near,
 )
 from .kinematics.full import true_theta2
-from .kinematics.rows import all_of, any_of, norms
+from .kinematics.rows import all_of, any_of, norms, take_rows
 from .machine import Machine
 
 
@@ -91,7 +91,7 @@ class IKResult:
 
     def rows(self, index: np.ndarray) -> IKResult:
         """The solutions of poses ``index`` (an index array or mask)."""
-        return _fieldwise(lambda a: a[index], self)
+        return _fieldwise(lambda a: take_rows(a, index), self)
 
     def scatter(self, index: np.ndarray, part: IKResult) -> IKResult:
         """A copy with rows ``index`` replaced by ``part``."""
@@ -117,7 +117,8 @@ def pose_margins(machine: Machine, joints: np.ndarray, platform: np.ndarray, alp
     out = [np.full(n, np.nan) for _ in Margins.__dataclass_fields__]
     for length in np.unique(lengths[reachable]):
         rows = reachable & (lengths == length)
-        found = margins(machine.kinematic_geometry(float(length)), joints[rows], platform[rows], alpha[rows])
+        found = margins(machine.kinematic_geometry(float(length)), np.compress(rows, joints, axis=0),
+                        np.compress(rows, platform, axis=0), alpha[rows])
         for array, name in zip(out, Margins.__dataclass_fields__, strict=True):
             array[rows] = getattr(found, name)
     return Margins(*out)
@@ -299,12 +300,16 @@ def forward_kinematics(machine: Machine, joints: np.ndarray, *, tool_length: flo
     """
     joints = np.atleast_2d(np.asarray(joints, dtype=float))
     lengths = np.broadcast_to(np.asarray(tool_length, dtype=float), (len(joints),))
+    each = np.unique(lengths)
+    if len(each) == 1:  # one tool: no rows to gather and scatter (each pose's numbers are its own)
+        fk = machine_fk_working(machine.kinematic_geometry(float(each[0])), joints, alpha_guess)
+        return FKResult(fk.tip, fk.axis, fk.alpha, fk.platform, fk.reachable)
     out = FKResult(np.empty((len(joints), 3)), np.empty((len(joints), 3)), np.empty(len(joints)),
                    np.empty((len(joints), 3)), np.empty(len(joints), bool))
-    for length in np.unique(lengths):
+    for length in each:
         rows = lengths == length
         guess = None if alpha_guess is None else np.asarray(alpha_guess)[rows]
-        fk = machine_fk_working(machine.kinematic_geometry(float(length)), joints[rows], guess)
+        fk = machine_fk_working(machine.kinematic_geometry(float(length)), np.compress(rows, joints, axis=0), guess)
         for name, value in (("tip", fk.tip), ("axis", fk.axis), ("alpha", fk.alpha), ("platform", fk.platform),
                             ("reachable", fk.reachable)):
             getattr(out, name)[rows] = value

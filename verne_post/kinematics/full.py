@@ -240,8 +240,11 @@ def _newton_route(geom: Geometry, tip: np.ndarray, axis: np.ndarray, pair: np.nd
     platform = _platform_pose(geom, xp, a, b, alpha)
     rho = working_sliders(geom, platform, alpha)
     good = finite_rows(rho) & (np.abs(alpha) < g.alpha_max)
-    good[good] = is_working_mode(geom, platform[good], alpha[good], rho[good])
-    good[good] = closure_ok(geom, platform[good], alpha[good], rho[good])
+    # judged at every pose, not the good ones gathered (a pose's verdict is its own; numpy gathers
+    # rows of (N, 3) arrays slowly): the others' NaN and inf say False
+    with np.errstate(invalid="ignore"):
+        good &= is_working_mode(geom, platform, alpha, rho)
+        good &= closure_ok(geom, platform, alpha, rho)
     joints = np.column_stack([rho, alpha - phi1, -phi2])
     candidates = ~good & (x1sq <= k + two_rr) & finite_rows(tip) & finite_rows(axis)
     return (joints, alpha, np.column_stack([phi1, phi2]), platform, np.column_stack([xp, a, b, x1sq]), good,

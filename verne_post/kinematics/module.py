@@ -28,27 +28,31 @@ from .trigpoly import TrigPoly, real_half_angle_roots
 
 def closure_residuals(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """Residuals (N, 4) of eq. 3a, 3b, 4, 5 (mm^2) for platform (N,3) mm, alpha (N,) rad, rho (N,3) mm."""
+    return np.stack(_closure_terms(geom, platform, alpha, rho), axis=-1)
+
+
+def _closure_terms(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`closure_residuals`' four columns (N,) each (mm^2)."""
     x, y, z = np.moveaxis(np.asarray(platform, dtype=float), -1, 0)
     c, s = np.cos(alpha), np.sin(alpha)
     r1_, r2_, r3_ = np.moveaxis(np.asarray(rho, dtype=float), -1, 0)
     g = geom
     x1, x2 = x + g.D1_minus_d1, x + g.D2_minus_d2
-    return np.stack(
-        [
-            x1**2 + (y + g.R1 * c - g.r1) ** 2 + (z + g.R1 * s - r1_) ** 2 - g.L1**2,
+    return (x1**2 + (y + g.R1 * c - g.r1) ** 2 + (z + g.R1 * s - r1_) ** 2 - g.L1**2,
             x1**2 + (y - g.R1 * c + g.r1) ** 2 + (z - g.R1 * s - r1_) ** 2 - g.L1**2,
             x2**2 + (y - g.R2 * c + g.r4) ** 2 + (z - g.R2 * s - r2_) ** 2 - g.L2**2,
-            x2**2 + (y + g.R2 * c - g.r4) ** 2 + (z + g.R2 * s - r3_) ** 2 - g.L3**2,
-        ],
-        axis=-1,
-    )
+            x2**2 + (y + g.R2 * c - g.r4) ** 2 + (z + g.R2 * s - r3_) ** 2 - g.L3**2)
 
 
 def closure_ok(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """True where all four closure equations hold to ``CLOSURE_TOL`` relative to L^2."""
-    scale = np.array([geom.L1**2, geom.L1**2, geom.L2**2, geom.L3**2])
-    residuals = closure_residuals(geom, platform, alpha, rho)
-    return all_of(np.abs(residuals) <= CLOSURE_TOL * scale)
+    ok = None
+    for residual, scale in zip(_closure_terms(geom, platform, alpha, rho),
+                               (geom.L1**2, geom.L1**2, geom.L2**2, geom.L3**2), strict=True):
+        holds = np.abs(residual) <= CLOSURE_TOL * scale
+        ok = holds if ok is None else ok & holds
+    return ok
 
 
 def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -61,8 +65,12 @@ def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray,
 
 def is_working_mode(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """The machine's mode: s_i = -1 for every leg and R1 cos(alpha) > r1 (no rod crossing)."""
-    signs = configuration_signs(geom, platform, alpha, rho)
-    return all_of(signs < 0) & (geom.R1 * np.cos(alpha) > geom.r1)
+    # configuration_signs' differences, each below 0 (as its sign is; NaN neither)
+    z = np.asarray(platform, dtype=float)[..., 2]
+    s = geom.R2 * np.sin(alpha)
+    rho = np.asarray(rho, dtype=float)
+    return ((rho[..., 0] - z < 0) & (rho[..., 1] - z + s < 0) & (rho[..., 2] - z - s < 0)
+            & (geom.R1 * np.cos(alpha) > geom.r1))
 
 
 # --------------------------------------------------------------------------- coupling (eq. 6-8)
@@ -439,9 +447,12 @@ def _working_branch(geom: Geometry, rho: np.ndarray, alpha: np.ndarray) -> tuple
     rho1, rho2, rho3 = rho[:, 0], rho[:, 1], rho[:, 2]
     ux = -g.D2_minus_d2 + g.D1_minus_d1  # same for both legs II and III
     w = g.R2 * c - g.r4
-    uz, vz = rho2 + g.R2 * s - rho1, rho3 - g.R2 * s - rho1
+    # common terms evaluated once, each in the order the whole expressions evaluate it (the same numbers)
+    r2_s, ww = g.R2 * s, w * w
+    uz, vz = rho2 + r2_s - rho1, rho3 - r2_s - rho1
     ra2 = g.L1**2 - g.R1**2 - g.r1**2 + 2.0 * g.R1 * g.r1 * c
-    uu, vv, uv = ux * ux + w * w + uz * uz, ux * ux + w * w + vz * vz, ux * ux - w * w + uz * vz
+    in_plane = ux * ux + ww
+    uu, vv, uv = in_plane + uz * uz, in_plane + vz * vz, ux * ux - ww + uz * vz
     b2, b3 = 0.5 * (ra2 - g.L2**2 + uu), 0.5 * (ra2 - g.L3**2 + vv)
     gram = uu * vv - uv * uv
     lam, mu = (b2 * vv - b3 * uv) / gram, (b3 * uu - b2 * uv) / gram
@@ -450,8 +461,9 @@ def _working_branch(geom: Geometry, rho: np.ndarray, alpha: np.ndarray) -> tuple
     px, py, pz = lam * ux + mu * ux, lam * w - mu * w, lam * uz + mu * vz
     with np.errstate(invalid="ignore"):
         nu = np.sqrt((ra2 - px * px - py * py - pz * pz) / gram) * np.sign(nz)
-    platform = np.stack([px + nu * nx - g.D1_minus_d1, py + nu * ny, pz + nu * nz + rho1], axis=-1)
-    residual = platform[:, 1] * (g.R1 * c - g.r1) - g.R1 * s * (rho1 - platform[:, 2])
+    y, z = py + nu * ny, pz + nu * nz + rho1
+    platform = np.stack([px + nu * nx - g.D1_minus_d1, y, z], axis=-1)
+    residual = y * (g.R1 * c - g.r1) - g.R1 * s * (rho1 - z)
     return platform, residual
 
 
@@ -487,22 +499,34 @@ def _secant_route(geom: Geometry, rho: np.ndarray, alpha_guess: np.ndarray | Non
     a1 = a0 + (1e-4 if warm else 0.02)
     _, f0 = _working_branch(geom, rho, a0)
     platform, f1 = _working_branch(geom, rho, a1)
-    active = np.arange(rho.shape[0])  # the poses still iterating: most need 2-3 steps, a few more
+    # The poses still iterating (most need 2-3 steps, a few more), their rows gathered: each pose's
+    # numbers are its own, and a pose's platform and alpha are written back once, when it stops
+    # (numpy gathers and scatters rows of (N, 3) arrays several times slower than whole arrays).
+    active = np.arange(rho.shape[0])
+    rho_a, plat_a, a0_a, a1_a, f0_a, f1_a = rho, platform, a0, a1, f0, f1
     for _ in range(12):
-        slope = f1[active] - f0[active]
-        step = np.clip(np.nan_to_num(np.divide(f1[active] * (a1[active] - a0[active]), slope,
-                                               out=np.zeros_like(slope), where=slope != 0)), -0.3, 0.3)
-        a0[active], f0[active] = a1[active], f1[active]
-        a1[active] -= step
-        platform[active], f1[active] = _working_branch(geom, rho[active], a1[active])
-        active = active[np.abs(step) >= 1e-15]
+        slope = f1_a - f0_a
+        step = np.clip(np.nan_to_num(np.divide(f1_a * (a1_a - a0_a), slope, out=np.zeros_like(slope),
+                                               where=slope != 0)), -0.3, 0.3)
+        a0_a, f0_a = a1_a, f1_a
+        a1_a = a1_a - step
+        plat_a, f1_a = _working_branch(geom, rho_a, a1_a)
+        going = np.abs(step) >= 1e-15
+        if going.all():
+            continue
+        stopped = active[~going]
+        a1[stopped], platform[stopped] = a1_a[~going], np.compress(~going, plat_a, axis=0)
+        active = active[going]
         if not active.size:
             break
+        rho_a, plat_a = np.compress(going, rho_a, axis=0), np.compress(going, plat_a, axis=0)
+        a0_a, a1_a, f0_a, f1_a = a0_a[going], a1_a[going], f0_a[going], f1_a[going]
+    if active.size:  # still going after the last step: where it stands
+        a1[active], platform[active] = a1_a, plat_a
     alpha = np.angle(np.exp(1j * a1))
     good = finite_rows(platform)
-    good[good] = closure_ok(geom, platform[good], alpha[good], rho[good]) & is_working_mode(
-        geom, platform[good], alpha[good], rho[good]
-    )
+    with np.errstate(invalid="ignore"):  # judged at every pose (as in _newton_route); the others say False
+        good &= closure_ok(geom, platform, alpha, rho) & is_working_mode(geom, platform, alpha, rho)
     platform[~good], alpha[~good] = np.nan, np.nan
     return platform, alpha, good
 

@@ -63,3 +63,12 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(..., 3): the cross products of the rows of ``a`` and ``b`` (..., 3); ``np.cross(a, b)``."""
     return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def take_rows(a: np.ndarray, index: np.ndarray | slice) -> np.ndarray:
+    """``a[index]`` along the first axis: by ``np.take`` for an index array and ``np.compress`` for a
+    mask, the same rows (copies, as ``a[index]`` makes them) without numpy's slow gather of short
+    rows (an (N, 3) array's rows: 4 to 5 times the time); a slice as a view."""
+    if isinstance(index, np.ndarray) and index.ndim == 1 and a.ndim > 1:
+        return np.compress(index, a, axis=0) if index.dtype == bool else np.take(a, index, axis=0)
+    return a[index]

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..api import IKResult, Status, concatenate, forward_kinematics
-from ..kinematics.rows import cross, dots, norms, squares
+from ..kinematics.rows import cross, dots, norms, squares, take_rows
 from ..machine import Machine
 from .branch import PathIK, solve_with_theta2
 from .poses import MachinePoses
@@ -92,8 +92,8 @@ class Blocks:
 
     def rows(self, index: np.ndarray | slice) -> Blocks:
         """The blocks ``index`` (in that order)."""
-        return Blocks(self.tip[index], self.axis[index], self.pose[index], self.fraction[index],
-                      self.result.rows(index), self.unresolved, self.between[index])
+        return Blocks(take_rows(self.tip, index), take_rows(self.axis, index), self.pose[index],
+                      self.fraction[index], self.result.rows(index), self.unresolved, self.between[index])
 
     def then(self, other: Blocks) -> Blocks:
         """These blocks, then those of ``other``."""
@@ -117,10 +117,11 @@ def deviation(machine: Machine, q0: np.ndarray, q1: np.ndarray, tip0: np.ndarray
     f = np.repeat(fractions[None, :], m, axis=0).ravel()
     rows = np.repeat(np.arange(m), len(fractions))
     guess = None if alpha is None else alpha[0][rows] + f * (alpha[1][rows] - alpha[0][rows])
-    fk = forward_kinematics(machine, q0[rows] + f[:, None] * (q1[rows] - q0[rows]), tool_length=lengths[rows],
+    start = take_rows(q0, rows)
+    fk = forward_kinematics(machine, start + f[:, None] * (take_rows(q1, rows) - start), tool_length=lengths[rows],
                             alpha_guess=guess)
-    tip_error = distance_to_segment(fk.tip, tip0[rows], tip1[rows])
-    axis_error = angle_to_arc(fk.axis, axis0[rows], axis1[rows])
+    tip_error = distance_to_segment(fk.tip, take_rows(tip0, rows), take_rows(tip1, rows))
+    axis_error = angle_to_arc(fk.axis, take_rows(axis0, rows), take_rows(axis1, rows))
     tip_error = np.where(fk.reachable, tip_error, np.inf).reshape(m, -1).max(axis=1)
     axis_error = np.where(fk.reachable, axis_error, np.inf).reshape(m, -1).max(axis=1)
     return tip_error, axis_error
@@ -156,7 +157,7 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
         all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
         k = all_seg[right]
         lengths = poses.tool_length[k]
-        ends = (all_joints[left], all_joints[right], all_tip[left], all_tip[right], all_axis[left], all_axis[right])
+        ends = tuple(take_rows(a, i) for a in (all_joints, all_tip, all_axis) for i in (left, right))
         tip_error, axis_error = deviation(machine, *ends, lengths, MIDDLE, (all_alpha[left], all_alpha[right]))
         # Quarters only where the middle alone does not already split the block: they could
         # only raise an error that is over the limit anyway.
@@ -177,9 +178,9 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
             break
         u0 = np.where(all_seg[left] == k, all_frac[left], 0.0)
         u = 0.5 * (u0 + all_frac[right])
-        start, end = poses.tip[k - 1], poses.tip[k]
+        start, end = take_rows(poses.tip, k - 1), take_rows(poses.tip, k)
         mid_tip = start + u[:, None] * (end - start)
-        mid_axis = slerp(path.axis[k - 1], path.axis[k], u)
+        mid_axis = slerp(take_rows(path.axis, k - 1), take_rows(path.axis, k), u)
         theta2 = 0.5 * (all_joints[left, 4] + all_joints[right, 4])
         mid, realised = solve_with_theta2(machine, mid_tip, mid_axis, lengths, theta2, cone)
         failing = until_failure and bool(np.any(mid.status != Status.OK))
@@ -197,5 +198,6 @@ def linearise(machine: Machine, poses: MachinePoses, path: PathIK, *, tol: float
     all_seg, all_frac = np.concatenate(seg), np.concatenate(frac)
     order = np.lexsort((all_frac, all_seg))
     merged = concatenate(results).rows(order)
-    return Blocks(np.concatenate(tip)[order], np.concatenate(axis)[order], all_seg[order], all_frac[order], merged,
+    return Blocks(take_rows(np.concatenate(tip), order), take_rows(np.concatenate(axis), order), all_seg[order],
+                  all_frac[order], merged,
                   np.unique(np.concatenate(unresolved)) if unresolved else np.empty(0, int), np.zeros(len(order), bool))

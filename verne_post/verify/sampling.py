@@ -10,7 +10,7 @@ import numpy as np
 
 from ..api import classify, forward_kinematics, pose_margins
 from ..kinematics import Margins
-from ..kinematics.rows import finite_rows, norms
+from ..kinematics.rows import finite_rows, norms, take_rows
 from ..machine import Machine
 from .gcode_reader import GcodeProgram
 from .reference import FIRST_INTERVALS, MAX_INTERVALS, POSE_CHUNK, RAPID_INTERVALS, SAMPLING_SHARE
@@ -43,11 +43,13 @@ class Poses:
         for start in range(0, max(n, 1), POSE_CHUNK):  # chunks bound the kinematics' temporary arrays
             rows = slice(start, start + POSE_CHUNK)
             use = np.flatnonzero(valid[rows]) + start
+            # the whole chunk (the rule) as a slice: its rows neither gathered nor scattered
+            at = rows if len(use) == len(valid[rows]) else use
             if use.size:
-                fk = forward_kinematics(machine, joints[use], tool_length=lengths[use],
-                                        alpha_guess=None if alpha_guess is None else alpha_guess[use])
-                tip[use], axis[use], alpha[use], platform[use] = fk.tip, fk.axis, fk.alpha, fk.platform
-                reachable[use] = fk.reachable
+                fk = forward_kinematics(machine, joints[at], tool_length=lengths[at],
+                                        alpha_guess=None if alpha_guess is None else alpha_guess[at])
+                tip[at], axis[at], alpha[at], platform[at] = fk.tip, fk.axis, fk.alpha, fk.platform
+                reachable[at] = fk.reachable
             margin_parts.append(pose_margins(machine, joints[rows], platform[rows], alpha[rows], reachable[rows],
                                              np.nan_to_num(lengths[rows])))
         found = _joined(margin_parts)
@@ -107,10 +109,11 @@ class Curves:
         first = np.cumsum(inner) - inner
         f = (np.arange(int(inner.sum())) - first[owner] + 1) / n[owner]
         m = moves[owner]
-        q = joints[m - 1] + f[:, None] * (joints[m] - joints[m - 1])
+        before = take_rows(joints, m - 1)
+        q = before + f[:, None] * (take_rows(joints, m) - before)
         guess = ends.alpha[m - 1] + f * (ends.alpha[m] - ends.alpha[m - 1])
         samples = Poses.at(machine, q, lengths[m], alpha_guess=np.nan_to_num(guess))
-        start_tip, start_axis = ends.tip[moves - 1].copy(), ends.axis[moves - 1].copy()
+        start_tip, start_axis = take_rows(ends.tip, moves - 1), take_rows(ends.axis, moves - 1)
         retooled = lengths[moves] != lengths[moves - 1]  # after a tool change: the start with the new tool
         if retooled.any():
             fk = forward_kinematics(machine, joints[moves[retooled] - 1], tool_length=lengths[moves[retooled]])
@@ -120,7 +123,7 @@ class Curves:
         tip, axis = np.empty((int((n + 1).sum()), 3)), np.empty((int((n + 1).sum()), 3))
         tip[start], axis[start] = start_tip, start_axis
         tip[inside], axis[inside] = samples.tip, samples.axis
-        tip[start + n], axis[start + n] = ends.tip[moves], ends.axis[moves]
+        tip[start + n], axis[start + n] = take_rows(ends.tip, moves), take_rows(ends.axis, moves)
         d2_tip, d2_axis = np.zeros(len(moves)), np.zeros(len(moves))
         if len(owner):
             for d2, points in ((d2_tip, tip), (d2_axis, axis)):
