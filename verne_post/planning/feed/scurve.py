@@ -52,13 +52,44 @@ def _ramp(speed: np.ndarray, acc: np.ndarray, rise: np.ndarray, fall: np.ndarray
     return t1, t2, t3, distance
 
 
+class _Ramps:
+    """The distances of :func:`_ramp` for given limits at many speeds in turn: what does not
+    depend on the speed is computed once (the same operations on the same numbers as there)."""
+
+    def __init__(self, acc: np.ndarray, rise: np.ndarray, fall: np.ndarray) -> None:
+        self.acc, self.rise, self.fall = acc, rise, fall
+        self.bend = 0.5 / rise + 0.5 / fall
+        self.reach = acc ** 2 * self.bend  # the speed at the end of two jerk phases to acc
+
+    def distance(self, speed: np.ndarray) -> np.ndarray:
+        """The distance :func:`_ramp` covers to ``speed`` (any unit of length, per s)."""
+        acc, rise, fall, bend = self.acc, self.rise, self.fall, self.bend
+        full = speed >= self.reach
+        peak = np.where(full, acc, np.sqrt(speed / bend))
+        t1, t3 = peak / rise, peak / fall
+        # _ramp's (speed - peak ** 2 * bend) / peak where peak is acc (full): speed - reach over acc
+        t2 = np.where(full, (speed - self.reach) / acc, 0.0)
+        v1 = rise * t1 ** 2 / 2.0
+        v2 = v1 + peak * t2
+        return (rise * t1 ** 3 / 6.0 + v1 * t2 + peak * t2 ** 2 / 2.0
+                + v2 * t3 + peak * t3 ** 2 / 2.0 - fall * t3 ** 3 / 6.0)
+
+
 def _scurve(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rest to rest over s in [0, 1], row by row: the ramp up under acc[:, 0] with the jerks
     jerk[:, 0] (rising) and jerk[:, 1], a cruise at the peak speed (at most ``cap``, 1/s), the
     ramp down under acc[:, 1] with the jerks jerk[:, 2] and jerk[:, 3] (the last, back to rest).
     Returns the 7 phase durations (S, 7) in s, their path jerks (S, 7) and the peak speed (S,)."""
+    # The bisection's 32 steps each need both ramps at the same speeds: as one array (the ramp
+    # up in the first S rows, the ramp down in the last S), half the numpy calls, the same
+    # values element by element.
+    count = len(cap)
+    ramps = _Ramps(np.concatenate([acc[:, 0], acc[:, 1]]), np.concatenate([jerk[:, 0], jerk[:, 3]]),
+                   np.concatenate([jerk[:, 1], jerk[:, 2]]))
+
     def covered(v: np.ndarray) -> np.ndarray:
-        return _ramp(v, acc[:, 0], jerk[:, 0], jerk[:, 1])[3] + _ramp(v, acc[:, 1], jerk[:, 3], jerk[:, 2])[3]
+        both = ramps.distance(np.concatenate([v, v]))
+        return both[:count] + both[count:]
 
     # Two ramps to v cover at least v^2 / (2 acc) each: the peak is below the speed where those make 1.
     low, high = np.zeros_like(cap), np.minimum(cap, np.sqrt(2.0 / (1.0 / acc[:, 0] + 1.0 / acc[:, 1])))
