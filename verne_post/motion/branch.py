@@ -20,6 +20,7 @@ import numpy as np
 
 from ..api import IKResult, Status, assess, concatenate, inverse_kinematics_pair, joint_bounds
 from ..kinematics import axis_from_angles, wrap_angle
+from ..kinematics.rows import take_rows
 from ..machine import Machine
 
 
@@ -87,7 +88,8 @@ class PathIK:
 
     def rows(self, index: np.ndarray | slice) -> PathIK:
         """The poses ``index`` (without the trace)."""
-        return PathIK(self.result.rows(index), self.axis[index], self.in_cone[index], self.pair_switch[index])
+        return PathIK(self.result.rows(index), take_rows(self.axis, index), self.in_cone[index],
+                      self.pair_switch[index])
 
     def then(self, other: PathIK) -> PathIK:
         """These poses, then those of ``other`` (without the trace)."""
@@ -101,10 +103,13 @@ def _pole_angle(axis: np.ndarray) -> np.ndarray:
     return np.arctan2(np.hypot(axis[:, 0], axis[:, 1]), axis[:, 2])
 
 
-def _by_length(lengths: np.ndarray, n: int, solve: Callable[[np.ndarray, float], IKResult]) -> IKResult:
+def _by_length(lengths: np.ndarray, n: int, solve: Callable[[np.ndarray | slice, float], IKResult]) -> IKResult:
     """Run ``solve(rows, tool_length)`` per tool length (mm) and gather the rows back in order."""
     out: IKResult | None = None
-    for length in np.unique(lengths):
+    each = np.unique(lengths)
+    if len(each) == 1:  # one tool: all rows as they are, none gathered and scattered
+        return solve(slice(None), float(each[0]))
+    for length in each:
         rows = np.flatnonzero(lengths == length)
         part = solve(rows, float(length))
         out = part.rows(np.zeros(n, int)) if out is None else out  # allocate full length once
