@@ -216,3 +216,20 @@ def test_the_head_is_the_stack_placed_whole() -> None:
     got = world.sampler()(joints, stack, None, frozenset({"cutter@table"}))
     want = _reference_sampler(world)(joints, stack, None, frozenset({"cutter@table"}))
     assert _same_bits(got.bodies["cutter@table"], want.bodies["cutter@table"])
+
+
+def test_each_block_gets_the_stack_of_its_tool_and_length() -> None:
+    """ProgramBodies.world's stacks, one per (tool, gauge length) pair in the order numpy sorts the
+    pairs as rows, and each block's index into them (unknown lengths taken as the first known)."""
+    machine = vp.load_machine()
+    rng = np.random.default_rng(11)
+    bodies = ProgramBodies(Setup(()), {})
+    for m in (1, 7, 5000):
+        tool = rng.integers(0, 5, m)
+        length = rng.choice([60.0, 80.0, 100.0, 100.5, np.nan], m)
+        world, index = bodies.world(machine.bodies, machine.geom, tool, length, np.zeros(3))
+        known = np.isfinite(length)
+        filled = np.where(known, length, length[known][0] if known.any() else 0.0)
+        rows, expected = np.unique(np.column_stack([tool.astype(float), filled]), axis=0, return_inverse=True)
+        assert np.array_equal(index, expected.reshape(-1))
+        assert [float(s.start[-1]) for s in world.stacks] == list(rows[:, 1])  # the spindle starts at the nose
