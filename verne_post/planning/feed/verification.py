@@ -48,6 +48,9 @@ def block_times(batch: Batch, profiles: Profiles) -> tuple[tuple[np.ndarray, np.
     span = at[m + 1] - at[m]
     with np.errstate(divide="ignore", invalid="ignore"):
         tau = np.clip(np.where(span > 0, h * (targets - at[m]) / span, 0.5 * h), lo, hi)
+    # A target, once converged, keeps its time: iterating on while others converge would move it
+    # in its last bits, so that a sequence's times depended on the sequences planned with it.
+    going = np.ones(len(tau), bool)
     for _ in range(60):
         f = ((c3 * tau + c2) * tau + c1) * tau + c0 - targets
         df = (3.0 * c3 * tau + 2.0 * c2) * tau + c1
@@ -58,8 +61,9 @@ def block_times(batch: Batch, profiles: Profiles) -> tuple[tuple[np.ndarray, np.
         ok = (df > 0) & (newton > lo) & (newton < hi)
         new = np.where(ok, newton, 0.5 * (lo + hi))
         done = (f == 0) | (np.abs(new - tau) <= 1e-15 * np.maximum(h, 1.0))
-        tau = np.where(f == 0, tau, new)
-        if np.all(done):
+        tau = np.where((f == 0) | ~going, tau, new)
+        going &= ~done
+        if not going.any():
             break
     times = np.zeros(tfirst[-1])
     inner = np.delete(np.arange(tfirst[-1]), np.r_[tfirst[:-1], tfirst[1:] - 1])
