@@ -65,3 +65,18 @@ def zigzag(machine: vp.Machine, n: int = 800, rows: int = 4) -> tuple[np.ndarray
     tilt = np.radians(30.0 + 10.0 * np.sin(2 * np.pi * phase))
     azimuth = np.radians(30.0) + 0.5 * np.sin(4 * np.pi * phase)
     return joints_along(machine, tip, axis_from(tilt, azimuth)), tip
+
+
+def feed_pieces(machine: vp.Machine, seed: int = 9, longest: int = 400
+                ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Feed sequences (joints, tip, feed mm/s): pieces of a helix and a zigzag of 2 to ``longest``
+    blocks at random feeds from 5 to 200 mm/s."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for joints, tip in (helix(machine, n=1201), zigzag(machine, n=900)):
+        start = 0
+        while start < len(joints) - 3:
+            stop = min(len(joints), start + int(rng.integers(3, longest)))
+            out.append((joints[start:stop], tip[start:stop], rng.uniform(5.0, 200.0, stop - start - 1)))
+            start = stop
+    return out

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import verne_post as vp
-from tests.paths import helix, zigzag
+from tests.paths import feed_pieces
 from verne_post.planning.feed import scurve, verification
 from verne_post.planning.feed_planner import FeedPlan, plan_feeds
 from verne_post.planning.timing import Limits
@@ -24,8 +24,24 @@ def _limits_rows(rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.n
             _log_uniform(rng, 1e-1, 1e6, 4 * count).reshape(count, 4), _log_uniform(rng, 1e-3, 1e3, count))
 
 
+def _ramp(speed: np.ndarray, acc: np.ndarray, rise: np.ndarray, fall: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The plain route: one ramp from rest to ``speed`` under ``acc`` with the jerks ``rise`` and
+    ``fall``, every term from the speed (the three phase durations and the distance)."""
+    bend = 0.5 / rise + 0.5 / fall
+    full = speed >= acc ** 2 * bend
+    peak = np.where(full, acc, np.sqrt(speed / bend))
+    t1, t3 = peak / rise, peak / fall
+    t2 = np.where(full, (speed - peak ** 2 * bend) / peak, 0.0)
+    v1 = rise * t1 ** 2 / 2.0
+    v2 = v1 + peak * t2
+    distance = (rise * t1 ** 3 / 6.0 + v1 * t2 + peak * t2 ** 2 / 2.0
+                + v2 * t3 + peak * t3 ** 2 / 2.0 - fall * t3 ** 3 / 6.0)
+    return t1, t2, t3, distance
+
+
 def test_ramp_distances_are_those_of_ramp() -> None:
-    """_Ramps.distance gives _ramp's distance, bit for bit, below and above full acceleration."""
+    """_Ramps gives the plain ramp's phases and distance, bit for bit, below and above full acceleration."""
     rng = np.random.default_rng(3)
     n = 20_000
     acc, rise, fall = (_log_uniform(rng, 1e-3, 1e4, n) for _ in range(3))
@@ -33,15 +49,17 @@ def test_ramp_distances_are_those_of_ramp() -> None:
     speed = reach * _log_uniform(rng, 1e-4, 1e4, n)
     speed[:100] = reach[:100]  # exactly at full acceleration
     ramps = scurve._Ramps(acc, rise, fall)
-    np.testing.assert_array_equal(ramps.distance(speed), scurve._ramp(speed, acc, rise, fall)[3])
+    np.testing.assert_array_equal(ramps.distance(speed), _ramp(speed, acc, rise, fall)[3])
+    for found, plain in zip(ramps.phases(speed), _ramp(speed, acc, rise, fall), strict=True):
+        np.testing.assert_array_equal(found, plain)
 
 
 def _scurve_one_ramp_at_a_time(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarray
                                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """_scurve with its two ramps evaluated by _ramp, each on its own (the plain route)."""
     def covered(v: np.ndarray) -> np.ndarray:
-        return (scurve._ramp(v, acc[:, 0], jerk[:, 0], jerk[:, 1])[3]
-                + scurve._ramp(v, acc[:, 1], jerk[:, 3], jerk[:, 2])[3])
+        return (_ramp(v, acc[:, 0], jerk[:, 0], jerk[:, 1])[3]
+                + _ramp(v, acc[:, 1], jerk[:, 3], jerk[:, 2])[3])
 
     low, high = np.zeros_like(cap), np.minimum(cap, np.sqrt(2.0 / (1.0 / acc[:, 0] + 1.0 / acc[:, 1])))
     short = covered(cap) > 1.0
@@ -50,8 +68,8 @@ def _scurve_one_ramp_at_a_time(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarra
         over = covered(mid) > 1.0
         low, high = np.where(over, low, mid), np.where(over, mid, high)
     speed = np.where(short, low, cap)
-    a1, a2, a3, up = scurve._ramp(speed, acc[:, 0], jerk[:, 0], jerk[:, 1])
-    d1, d2, d3, down = scurve._ramp(speed, acc[:, 1], jerk[:, 3], jerk[:, 2])
+    a1, a2, a3, up = _ramp(speed, acc[:, 0], jerk[:, 0], jerk[:, 1])
+    d1, d2, d3, down = _ramp(speed, acc[:, 1], jerk[:, 3], jerk[:, 2])
     cruise = np.maximum(1.0 - up - down, 0.0) / speed
     zero = np.zeros_like(speed)
     return (np.stack([a1, a2, a3, cruise, d3, d2, d1], axis=1),
@@ -69,19 +87,6 @@ def test_scurve_bisects_both_ramps_as_the_plain_route() -> None:
             np.testing.assert_array_equal(found, plain)
 
 
-def _sequences(machine: vp.Machine) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Pieces of a helix and a zigzag of 2 to 400 blocks at feeds from 5 to 200 mm/s."""
-    rng = np.random.default_rng(9)
-    out = []
-    for joints, tip in (helix(machine, n=1201), zigzag(machine, n=900)):
-        start = 0
-        while start < len(joints) - 3:
-            stop = min(len(joints), start + int(rng.integers(3, 400)))
-            out.append((joints[start:stop], tip[start:stop], rng.uniform(5.0, 200.0, stop - start - 1)))
-            start = stop
-    return out
-
-
 def _arrays(plan: FeedPlan) -> list[np.ndarray]:
     return [plan.durations, plan.block_times, plan.waypoint_s, plan.path.coef, plan.profile.breaks,
             plan.profile.coef, plan.peak_ratios, np.array([plan.filter_width, plan.gridpoints, plan.refinements])]
@@ -91,38 +96,14 @@ def test_verification_in_chunks_of_any_size_gives_the_same_plans(machine: vp.Mac
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """The verification's samples are evaluated in chunks to stay in cache: the plans (and the
     peaks they certify) are the same, bit for bit, for chunks of 2^16, 2^13 and 997 samples."""
-    sequences, limits = _sequences(machine), Limits.from_machine(machine)
+    sequences, limits = feed_pieces(machine), Limits.from_machine(machine)
     plans = {}
     for chunk in (1 << 16, 1 << 13, 997):
         monkeypatch.setattr(verification, "_VERIFY_CHUNK", chunk)
         plans[chunk] = plan_feeds(sequences, limits, angular_feed=1.0)
     assert all(isinstance(plan, FeedPlan) for plan in plans[997])
-    for plan, other in zip(plans[1 << 16], plans[997], strict=True):
-        for a, b in zip(_arrays(plan), _arrays(other), strict=True):  # type: ignore[arg-type]
-            np.testing.assert_array_equal(a, b)
-    for plan, other in zip(plans[1 << 16], plans[1 << 13], strict=True):
-        for a, b in zip(_arrays(plan), _arrays(other), strict=True):  # type: ignore[arg-type]
-            np.testing.assert_array_equal(a, b)
+    for chunk in (997, 1 << 13):
+        for plan, other in zip(plans[1 << 16], plans[chunk], strict=True):
+            for a, b in zip(_arrays(plan), _arrays(other), strict=True):  # type: ignore[arg-type]
+                np.testing.assert_array_equal(a, b)
 
-
-def test_a_sequence_is_planned_the_same_alone_or_with_others(machine: vp.Machine) -> None:
-    """Each feed sequence is planned from rest to rest on its own: batched with others (as a part
-    of a program is) its plan must be the same, bit for bit, as planned alone, or a program would
-    change with where it is split into parts. (The waypoint times' Newton iteration once moved
-    converged targets on while others converged: 14 of these 112 sequences differed.)"""
-    limits = Limits.from_machine(machine)
-    sequences = []
-    for seed in range(4):
-        rng = np.random.default_rng(seed)
-        for joints, tip in (helix(machine, n=1201), zigzag(machine, n=900)):
-            start = 0
-            while start < len(joints) - 3:
-                stop = min(len(joints), start + int(rng.integers(3, 150)))
-                sequences.append((joints[start:stop], tip[start:stop], rng.uniform(5.0, 200.0, stop - start - 1)))
-                start = stop
-    together = plan_feeds(sequences, limits, angular_feed=1.0)
-    for sequence, plan in zip(sequences, together, strict=True):
-        alone = plan_feeds([sequence], limits, angular_feed=1.0)[0]
-        assert isinstance(plan, FeedPlan) and isinstance(alone, FeedPlan)
-        for a, b in zip(_arrays(plan), _arrays(alone), strict=True):
-            np.testing.assert_array_equal(a, b)

@@ -34,45 +34,33 @@ SCURVE_MARGIN = 1.001  # a limit is lowered a little past the excess found at th
 _SCURVE_START_SAMPLES = 64  # uniform path samples for the first limits
 
 
-def _ramp(speed: np.ndarray, acc: np.ndarray, rise: np.ndarray, fall: np.ndarray
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """From rest to ``speed`` with the acceleration at most ``acc``, its jerk ``rise`` while the
-    acceleration grows and ``fall`` while it returns to 0 (any unit of length; all per s^k):
-    the durations (s) of the three phases, the middle one at constant acceleration, and the
-    distance covered."""
-    bend = 0.5 / rise + 0.5 / fall  # speed gained over the two jerk phases, per acceleration^2
-    full = speed >= acc ** 2 * bend
-    peak = np.where(full, acc, np.sqrt(speed / bend))
-    t1, t3 = peak / rise, peak / fall
-    t2 = np.where(full, (speed - peak ** 2 * bend) / peak, 0.0)
-    v1 = rise * t1 ** 2 / 2.0
-    v2 = v1 + peak * t2
-    distance = (rise * t1 ** 3 / 6.0 + v1 * t2 + peak * t2 ** 2 / 2.0
-                + v2 * t3 + peak * t3 ** 2 / 2.0 - fall * t3 ** 3 / 6.0)
-    return t1, t2, t3, distance
-
-
 class _Ramps:
-    """The distances of :func:`_ramp` for given limits at many speeds in turn: what does not
-    depend on the speed is computed once (the same operations on the same numbers as there)."""
+    """Ramps from rest to a speed with the acceleration at most ``acc``, its jerk ``rise`` while the
+    acceleration grows and ``fall`` while it returns to 0 (any unit of length; all per s^k), at
+    many speeds in turn: what does not depend on the speed is computed once."""
 
     def __init__(self, acc: np.ndarray, rise: np.ndarray, fall: np.ndarray) -> None:
         self.acc, self.rise, self.fall = acc, rise, fall
-        self.bend = 0.5 / rise + 0.5 / fall
+        self.bend = 0.5 / rise + 0.5 / fall  # speed gained over the two jerk phases, per acceleration^2
         self.reach = acc ** 2 * self.bend  # the speed at the end of two jerk phases to acc
 
-    def distance(self, speed: np.ndarray) -> np.ndarray:
-        """The distance :func:`_ramp` covers to ``speed`` (any unit of length, per s)."""
+    def phases(self, speed: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """To ``speed``: the durations (s) of the three phases, the middle one at constant
+        acceleration, and the distance covered."""
         acc, rise, fall, bend = self.acc, self.rise, self.fall, self.bend
         full = speed >= self.reach
         peak = np.where(full, acc, np.sqrt(speed / bend))
         t1, t3 = peak / rise, peak / fall
-        # _ramp's (speed - peak ** 2 * bend) / peak where peak is acc (full): speed - reach over acc
-        t2 = np.where(full, (speed - self.reach) / acc, 0.0)
+        t2 = np.where(full, (speed - self.reach) / acc, 0.0)  # peak is acc there: (speed - peak^2 bend) / peak
         v1 = rise * t1 ** 2 / 2.0
         v2 = v1 + peak * t2
-        return (rise * t1 ** 3 / 6.0 + v1 * t2 + peak * t2 ** 2 / 2.0
-                + v2 * t3 + peak * t3 ** 2 / 2.0 - fall * t3 ** 3 / 6.0)
+        distance = (rise * t1 ** 3 / 6.0 + v1 * t2 + peak * t2 ** 2 / 2.0
+                    + v2 * t3 + peak * t3 ** 2 / 2.0 - fall * t3 ** 3 / 6.0)
+        return t1, t2, t3, distance
+
+    def distance(self, speed: np.ndarray) -> np.ndarray:
+        """The distance covered to ``speed`` (any unit of length, per s)."""
+        return self.phases(speed)[3]
 
 
 def _scurve(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -99,8 +87,10 @@ def _scurve(cap: np.ndarray, acc: np.ndarray, jerk: np.ndarray) -> tuple[np.ndar
         over = covered(mid) > 1.0
         low, high = np.where(over, low, mid), np.where(over, mid, high)
     speed = np.where(short, low, cap)
-    a1, a2, a3, up = _ramp(speed, acc[:, 0], jerk[:, 0], jerk[:, 1])
-    d1, d2, d3, down = _ramp(speed, acc[:, 1], jerk[:, 3], jerk[:, 2])
+    ramp_up, ramp_down = zip(*(np.split(x, [count]) for x in ramps.phases(np.concatenate([speed, speed]))),
+                             strict=True)
+    a1, a2, a3, up = ramp_up
+    d1, d2, d3, down = ramp_down
     cruise = np.maximum(1.0 - up - down, 0.0) / speed
     zero = np.zeros_like(speed)
     durations = np.stack([a1, a2, a3, cruise, d3, d2, d1], axis=1)
