@@ -55,22 +55,24 @@ def closure_ok(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.
     return ok
 
 
-def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
-    """Configuration indices s_i (N, 3) of eq. 10-12: signs of rho_i minus the platform point height."""
+def _slider_heights(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per leg (N,) each: rho_i minus the height of its platform point (mm), whose signs are s_i."""
     z = np.asarray(platform, dtype=float)[..., 2]
     s = geom.R2 * np.sin(alpha)
     rho = np.asarray(rho, dtype=float)
-    return np.sign(np.stack([rho[..., 0] - z, rho[..., 1] - z + s, rho[..., 2] - z - s], axis=-1))
+    return rho[..., 0] - z, rho[..., 1] - z + s, rho[..., 2] - z - s
+
+
+def configuration_signs(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Configuration indices s_i (N, 3) of eq. 10-12: signs of rho_i minus the platform point height."""
+    return np.sign(np.stack(_slider_heights(geom, platform, alpha, rho), axis=-1))
 
 
 def is_working_mode(geom: Geometry, platform: np.ndarray, alpha: np.ndarray, rho: np.ndarray) -> np.ndarray:
     """The machine's mode: s_i = -1 for every leg and R1 cos(alpha) > r1 (no rod crossing)."""
-    # configuration_signs' differences, each below 0 (as its sign is; NaN neither)
-    z = np.asarray(platform, dtype=float)[..., 2]
-    s = geom.R2 * np.sin(alpha)
-    rho = np.asarray(rho, dtype=float)
-    return ((rho[..., 0] - z < 0) & (rho[..., 1] - z + s < 0) & (rho[..., 2] - z - s < 0)
-            & (geom.R1 * np.cos(alpha) > geom.r1))
+    first, second, third = _slider_heights(geom, platform, alpha, rho)  # each below 0 as its sign is; NaN neither
+    return (first < 0) & (second < 0) & (third < 0) & (geom.R1 * np.cos(alpha) > geom.r1)
 
 
 # --------------------------------------------------------------------------- coupling (eq. 6-8)
